@@ -1,0 +1,51 @@
+"""The ``graspsim`` command line.
+
+Each subcommand lives in its own module under :mod:`graspsim.commands` and exposes
+``register(subparsers)``; it only parses arguments and calls a library function that the tests
+call directly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+# Subcommand modules, in the order `graspsim --help` lists them.
+COMMANDS = [
+    "run",
+    "show",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="graspsim",
+        description="DLSR grasp detection with simulation in the loop.",
+    )
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        importlib.import_module(f"graspsim.commands.{name}").register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose > 1 else logging.INFO,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        result = args.func(args)
+    except (FileNotFoundError, ValueError) as exc:
+        # Bad input is reported in one line naming the file or item, not as a stack trace.
+        print(f"graspsim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return int(result or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
