@@ -1,0 +1,411 @@
+"""From rectangle images to the paper's feature vectors.
+
+rectangle image (24x24x8 + masks) -> all 19x19 stride-1 6x6x8 patches -> per-patch group
+standardisation -> ZCA whitening -> encoding against a learned dictionary -> polarity splitting
+-> quadrant sum pooling (rows and columns split 10 | 9) -> one vector per rectangle
+(4 * 2 * n_atoms = 2,400 for 300 atoms; 4 * n_atoms = 1,200 for NKM-Natural, which has no
+polarity split).
+
+Rectangle images travel through scikit-learn as one 2-D array (see :func:`pack_images`):
+``(n, 24 * 24 * 8 * 2)`` float32, the values followed by the masks (1.0 valid, 0.0 masked),
+so that ``Pipeline``, ``GridSearchCV``, ``cross_val_score`` and group splitters work unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from sklearn.base import BaseEstimator, TransformerMixin
+from sklearn.utils import check_random_state
+from sklearn.utils.validation import check_is_fitted, validate_data
+
+from . import coding, dictionaries, patches, whitening
+
+__all__ = [
+    "LEARNERS",
+    "ENCODERS",
+    "ENCODER_GRIDS",
+    "pack_images",
+    "unpack_images",
+    "quadrant_pool",
+    "Representation",
+    "fit_representation",
+    "encode_patches",
+    "rectangle_features",
+    "DLSRFeatures",
+]
+
+LEARNERS = ("SC", "OMP", "GSVQ", "NKM", "RP", "R")
+# Encoders in the column order of the paper's Table 1.
+ENCODERS = ("SC", "mSC", "OMP", "mOMP", "ST", "Natural")
+# Inner-CV grids of the encoder's parameter (reference facts); natural encoders have none.
+ENCODER_GRIDS = {
+    "SC": (0.5, 1.0, 1.5, 2.0),
+    "mSC": (1.0, 2.0, 3.0, 4.0),
+    "OMP": (1, 5, 10, 15),
+    "mOMP": (1, 5, 10, 15),
+    "ST": (0.5, 1.0, 1.5, 2.0),
+    "Natural": (None,),
+}
+
+IMAGE_SIZE = 24
+N_CHANNELS = 8
+PATCH_SIZE = 6
+POOL_SPLIT = 10
+
+
+def pack_images(images, masks) -> np.ndarray:
+    """Pack rectangle images and masks into one 2-D array for scikit-learn.
+
+    Parameters
+    ----------
+    images : ndarray of shape (n, 24, 24, 8)
+    masks : ndarray of shape (n, 24, 24, 8), bool
+
+    Returns
+    -------
+    ndarray of shape (n, 9216), float32
+    """
+    images = np.asarray(images, dtype=np.float32)
+    masks = np.asarray(masks, dtype=bool)
+    if images.shape != masks.shape or images.ndim != 4:
+        raise ValueError(
+            f"images and masks must both be (n, H, W, C), got {images.shape} and {masks.shape}"
+        )
+    n = images.shape[0]
+    return np.concatenate([images.reshape(n, -1), masks.reshape(n, -1).astype(np.float32)], 1)
+
+
+def unpack_images(X, size: int = IMAGE_SIZE, channels: int = N_CHANNELS):
+    """Inverse of :func:`pack_images`: ``(images float32, masks bool)``, each (n, size, size, C)."""
+    X = np.asarray(X)
+    per = size * size * channels
+    if X.ndim != 2 or X.shape[1] != 2 * per:
+        raise ValueError(
+            f"packed rectangle images must have shape (n, {2 * per}) "
+            f"(values then masks of {size}x{size}x{channels}), got {X.shape}"
+        )
+    n = X.shape[0]
+    images = X[:, :per].reshape(n, size, size, channels).astype(np.float32, copy=False)
+    masks = X[:, per:].reshape(n, size, size, channels) > 0.5
+    return images, masks
+
+
+def quadrant_pool(codes, split: int = POOL_SPLIT) -> np.ndarray:
+    """Sum-pool a code map over four quadrants.
+
+    Parameters
+    ----------
+    codes : ndarray of shape (n, R, C, k)
+        Codes of the R x C patch grid (19 x 19 for 24 x 24 images and 6 x 6 patches).
+    split : int
+        Rows ``[:split]`` / ``[split:]`` and the same for columns (10 | 9, as the authors).
+
+    Returns
+    -------
+    ndarray of shape (n, 4 * k)
+        Quadrants in the order top-left, top-right, bottom-left, bottom-right.
+    """
+    codes = np.asarray(codes)
+    if codes.ndim != 4:
+        raise ValueError(f"codes must be (n, rows, cols, k), got {codes.shape}")
+    top, bottom = codes[:, :split], codes[:, split:]
+    quads = [
+        top[:, :, :split].sum(axis=(1, 2)),
+        top[:, :, split:].sum(axis=(1, 2)),
+        bottom[:, :, :split].sum(axis=(1, 2)),
+        bottom[:, :, split:].sum(axis=(1, 2)),
+    ]
+    return np.concatenate(quads, axis=1)
+
+
+@dataclass
+class Representation:
+    """What unsupervised learning produces: whitening and a dictionary.
+
+    Attributes
+    ----------
+    learner : str
+    dictionary : ndarray of shape (n_atoms, 288)
+        Atoms as rows (unit norm except for SC/OMP, whose atoms have norm <= 1).
+    centroids : ndarray of shape (n_atoms, 288) or None
+        Un-normalised k-means centroids (NKM only; used by its natural triangle encoder).
+    zca_mean : ndarray of shape (288,) or None
+        None when whitening is off.
+    zca_matrix : ndarray of shape (288, 288) or None
+    natural_param : float or int or None
+        The dictionary's own coding parameter (SC's lambda, OMP's L), used by "Natural".
+    """
+
+    learner: str
+    dictionary: np.ndarray
+    centroids: np.ndarray | None
+    zca_mean: np.ndarray | None
+    zca_matrix: np.ndarray | None
+    natural_param: float | None = None
+
+    def to_arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
+        out = {f"{prefix}dictionary": self.dictionary}
+        if self.centroids is not None:
+            out[f"{prefix}centroids"] = self.centroids
+        if self.zca_mean is not None:
+            out[f"{prefix}zca_mean"] = self.zca_mean
+            out[f"{prefix}zca_matrix"] = self.zca_matrix
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays, learner: str, natural_param=None, prefix: str = ""):
+        def get(name):
+            key = f"{prefix}{name}"
+            return np.asarray(arrays[key]) if key in arrays else None
+
+        return cls(
+            learner=learner,
+            dictionary=get("dictionary"),
+            centroids=get("centroids"),
+            zca_mean=get("zca_mean"),
+            zca_matrix=get("zca_matrix"),
+            natural_param=natural_param,
+        )
+
+
+def _preprocess_patches(X, M, rep_or_zca):
+    """Standardise and (optionally) whiten flattened patches; masked entries end at 0."""
+    X = whitening.standardize_patches(X, M)
+    mean, P = rep_or_zca
+    if mean is not None:
+        X = whitening.apply_zca(X, M, mean, P)
+    return X
+
+
+def fit_representation(
+    images,
+    masks,
+    learner: str,
+    n_atoms: int = 300,
+    whiten: bool = True,
+    n_patches: int = 100_000,
+    min_valid: float = 0.2,
+    extra=None,
+    random_state=None,
+    dictionary_params: dict | None = None,
+) -> Representation:
+    """Learn whitening and a dictionary from random patches of the training rectangles.
+
+    Parameters
+    ----------
+    images, masks : ndarray of shape (n, 24, 24, 8)
+        Training rectangle images only (fold hygiene is the caller's business).
+    learner : {"SC", "OMP", "GSVQ", "NKM", "RP", "R"}
+    n_atoms : int
+    whiten : bool
+        ZCA whitening (epsilon 0.1) after per-patch standardisation.
+    n_patches : int
+        Random patches drawn across the rectangles (100,000 in the paper).
+    min_valid : float
+        A patch is accepted when at least this fraction of its entries is valid.
+    extra : tuple (patches, masks) or None
+        Extra unlabelled patches (self-taught learning), each ``(m, 6, 6, 8)``.
+    random_state : int, Generator, RandomState or None
+
+    Returns
+    -------
+    Representation
+    """
+    if learner not in LEARNERS:
+        raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
+    rs = check_random_state(random_state)
+    seeds = rs.randint(0, 2**31 - 1, size=2)
+    X, M = patches.sample_patches(
+        images, masks, n_patches=n_patches, min_valid=min_valid,
+        random_state=int(seeds[0]), extra=extra,
+    )
+    Xs = whitening.standardize_patches(X, M)
+    if whiten:
+        mean, P = whitening.fit_zca(Xs, M)
+        Xw = whitening.apply_zca(Xs, M, mean, P)
+    else:
+        mean, P = None, None
+        Xw = Xs
+    learned = dictionaries.learn_dictionary(
+        Xw, learner, n_atoms=n_atoms, random_state=int(seeds[1]), **(dictionary_params or {})
+    )
+    centroids = None
+    natural_param = None
+    if isinstance(learned, dictionaries.LearnedDictionary):
+        D = learned.components
+        centroids = learned.centroids
+        natural_param = learned.natural_param
+    else:
+        D = learned
+    return Representation(learner, np.asarray(D, np.float32), centroids, mean, P, natural_param)
+
+
+def encode_patches(X, M, rep: Representation, encoder: str, param=None, polarity: bool = True):
+    """Encode preprocessed patches.
+
+    Parameters
+    ----------
+    X : ndarray of shape (m, 288)
+        Standardised (and whitened) patches, masked entries 0.
+    M : ndarray of shape (m, 288), bool
+    rep : Representation
+    encoder : {"SC", "mSC", "OMP", "mOMP", "ST", "Natural"}
+    param : float or int or None
+        lambda for SC/mSC/ST, the number of non-zeros for OMP/mOMP; ignored by Natural.
+    polarity : bool
+        Polarity splitting ``[max(a, 0), max(-a, 0)]`` (never for NKM-Natural).
+
+    Returns
+    -------
+    ndarray of shape (m, k)
+        ``k = 2 * n_atoms`` with polarity splitting, else ``n_atoms``.
+    """
+    D = rep.dictionary
+    if encoder == "SC":
+        A = coding.lasso(X, D, param)
+    elif encoder == "mSC":
+        A = coding.lasso(X, D, param, mask=M)
+    elif encoder == "OMP":
+        A = coding.omp(X, D, int(param))
+    elif encoder == "mOMP":
+        A = coding.omp(X, D, int(param), mask=M)
+    elif encoder == "ST":
+        A = coding.soft_threshold(X, D, param)
+    elif encoder == "Natural":
+        return coding.natural_encode(X, M, rep.learner, D, centroids=rep.centroids,
+                                     param=rep.natural_param, polarity=polarity)
+    else:
+        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
+    return coding.polarity_split(A) if polarity else A
+
+
+def rectangle_features(
+    images,
+    masks,
+    rep: Representation,
+    encoder: str,
+    param=None,
+    polarity: bool = True,
+    chunk_size: int = 64,
+) -> np.ndarray:
+    """Features of many rectangles, streamed in chunks to bound memory.
+
+    Parameters
+    ----------
+    images, masks : ndarray of shape (n, 24, 24, 8)
+    rep : Representation
+    encoder, param, polarity : see :func:`encode_patches`
+    chunk_size : int
+        Rectangles encoded at once (each is 361 patches).
+
+    Returns
+    -------
+    ndarray of shape (n, 4 * k), float32
+    """
+    images = np.asarray(images, dtype=np.float32)
+    masks = np.asarray(masks, dtype=bool)
+    n = len(images)
+    out = None
+    for start in range(0, n, chunk_size):
+        P, PM = patches.extract_patches(images[start:start + chunk_size],
+                                        masks[start:start + chunk_size], PATCH_SIZE)
+        b, g, p = P.shape
+        Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
+                                 (rep.zca_mean, rep.zca_matrix))
+        A = encode_patches(Xp, PM.reshape(b * g, p), rep, encoder, param, polarity)
+        side = int(round(np.sqrt(g)))
+        pooled = quadrant_pool(A.reshape(b, side, side, -1))
+        if out is None:
+            out = np.empty((n, pooled.shape[1]), dtype=np.float32)
+        out[start:start + b] = pooled
+    if out is None:
+        raise ValueError("no rectangles to featurise")
+    return out
+
+
+class DLSRFeatures(TransformerMixin, BaseEstimator):
+    """The DLSR representation as a scikit-learn transformer.
+
+    ``fit`` learns whitening and a dictionary from random patches of the training rectangles;
+    ``transform`` encodes every patch and pools. Input is packed rectangle images
+    (:func:`pack_images`).
+
+    Parameters
+    ----------
+    learner : {"SC", "OMP", "GSVQ", "NKM", "RP", "R"}, default="NKM"
+    encoder : {"SC", "mSC", "OMP", "mOMP", "ST", "Natural"}, default="SC"
+    encoder_param : float or int or None
+        lambda (SC, mSC, ST) or number of non-zeros (OMP, mOMP); None takes the middle of the
+        reference grid.
+    n_atoms : int, default=300
+    whiten : bool, default=True
+    n_patches : int, default=100_000
+    min_valid : float, default=0.2
+    polarity : bool, default=True
+    extra_patches : tuple (patches, masks) or None
+        Self-taught learning: unlabelled patches joined to dictionary learning.
+    chunk_size : int, default=64
+    random_state : int, RandomState instance or None
+
+    Attributes
+    ----------
+    representation_ : Representation
+    n_features_out_ : int
+    """
+
+    def __init__(
+        self,
+        learner="NKM",
+        encoder="SC",
+        encoder_param=None,
+        n_atoms=300,
+        whiten=True,
+        n_patches=100_000,
+        min_valid=0.2,
+        polarity=True,
+        extra_patches=None,
+        chunk_size=64,
+        random_state=None,
+    ):
+        self.learner = learner
+        self.encoder = encoder
+        self.encoder_param = encoder_param
+        self.n_atoms = n_atoms
+        self.whiten = whiten
+        self.n_patches = n_patches
+        self.min_valid = min_valid
+        self.polarity = polarity
+        self.extra_patches = extra_patches
+        self.chunk_size = chunk_size
+        self.random_state = random_state
+
+    def _param(self):
+        if self.encoder not in ENCODERS:
+            raise ValueError(f"unknown encoder {self.encoder!r}; choose from {ENCODERS}")
+        if self.encoder_param is not None or self.encoder == "Natural":
+            return self.encoder_param
+        grid = ENCODER_GRIDS[self.encoder]
+        return grid[len(grid) // 2 - 1]
+
+    def fit(self, X, y=None):
+        X = validate_data(self, X, dtype=np.float32)
+        images, masks = unpack_images(X)
+        self._param()
+        self.representation_ = fit_representation(
+            images, masks, self.learner, n_atoms=self.n_atoms, whiten=self.whiten,
+            n_patches=self.n_patches, min_valid=self.min_valid, extra=self.extra_patches,
+            random_state=self.random_state,
+        )
+        self.n_features_out_ = self.transform(X[:1]).shape[1]
+        return self
+
+    def transform(self, X):
+        check_is_fitted(self, "representation_")
+        X = validate_data(self, X, dtype=np.float32, reset=False)
+        images, masks = unpack_images(X)
+        return rectangle_features(
+            images, masks, self.representation_, self.encoder, self._param(),
+            polarity=self.polarity, chunk_size=self.chunk_size,
+        )
