@@ -127,10 +127,18 @@ class GraspRectangle:
     def area(self) -> float:
         return self.w * self.h
 
-    def scaled(self, factor: float) -> GraspRectangle:
-        """The same rectangle in an image resized by ``factor`` (centre and sizes scale)."""
+    def scaled(self, factor: float, factor_y: float | None = None) -> GraspRectangle:
+        """The same rectangle in an image resized by ``factor``.
+
+        Centres map like the pixel grid of ``cv2.resize`` (pixel centres at integer
+        coordinates): ``x' = (x + 0.5) * sx - 0.5``, and likewise for ``y`` with ``factor_y``
+        (default ``factor``, for a resize whose rounding makes the two axes differ slightly);
+        sizes scale by ``factor``.
+        """
+        sy = factor if factor_y is None else factor_y
         return GraspRectangle(
-            self.x * factor, self.y * factor, self.theta, self.w * factor, self.h * factor
+            (self.x + 0.5) * factor - 0.5, (self.y + 0.5) * sy - 0.5, self.theta,
+            self.w * factor, self.h * factor,
         )
 
 

@@ -141,3 +141,7 @@ class SquaredHingeSVC(ClassifierMixin, BaseEstimator):
 
     def predict(self, X):
         return self.classes_[(self.decision_function(X) > 0).astype(int)]
+
+
+# Instances collected by tests/dlsr/test_estimator_checks.py (parametrize_with_checks).
+ESTIMATORS = [FeatureStandardizer(), SquaredHingeSVC()]
