@@ -1,0 +1,27 @@
+"""``graspsim patches``: unlabelled 6x6x8 patches from random rendered scenes."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "patches", help="random 6x6x8 patches of simulated rectangle images (self-taught data)"
+    )
+    p.add_argument("--n", type=int, default=100_000, help="number of patches")
+    p.add_argument("--out", required=True, help=".npz file (dlsr.patches.load_patch_file)")
+    p.add_argument("--objects", default="all", choices=["train", "test", "all"])
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--scenes", type=int, default=None, help="default: n / 2000")
+    p.add_argument("--jobs", type=int, default=1)
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from graspsim.datagen import make_patches
+
+    s = make_patches(n=args.n, out=args.out, objects=args.objects, seed=args.seed,
+                     n_scenes=args.scenes, n_jobs=args.jobs, progress=True)
+    print(f"wrote {s['n']} patches from {s['scenes']} scenes to {s['path']}")
+    return 0

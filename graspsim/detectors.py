@@ -1,0 +1,197 @@
+"""Baseline grasp detectors and the detector loader.
+
+A detector is anything with ``predict(obs) -> list[GraspRectangle]``, best first. ``obs`` is the
+environment's observation dict (``rgb`` uint8 (H, W, 3), ``depth`` float32 (H, W) metres,
+``depth_valid`` (H, W)); the trial harness adds ``seed`` (an int for stochastic detectors) and,
+when the scene was labelled, ``positives`` (physics-labelled positives ranked best first).
+
+* ``random``: a uniformly random rectangle anywhere in the image (succeeds rarely).
+* ``mask-pca``: segments the object from depth alone (the table plane is fitted in ``1/z``, which
+  is linear in the pixel coordinates for any plane, so no intrinsics are needed), then grasps at
+  the mask centroid across its minor axis, opening = the mask's extent there plus a margin.
+* ``oracle``: the best physics-labelled positive (needs ``obs["positives"]``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from dlsr.rectangles import GraspRectangle
+
+from .labelling import extent_along, mask_axes
+
+__all__ = [
+    "RandomDetector",
+    "MaskPCADetector",
+    "OracleDetector",
+    "DETECTORS",
+    "load_detector",
+    "object_mask_from_depth",
+]
+
+
+class RandomDetector:
+    """Uniformly random rectangles.
+
+    Parameters
+    ----------
+    n : int
+        Rectangles per call.
+    w_px, h_px : (float, float)
+        Ranges of opening and jaw size, pixels.
+    random_state : int, Generator or None
+        Used when ``obs`` carries no ``seed``.
+    """
+
+    requires_labels = False
+
+    def __init__(self, n=1, w_px=(20.0, 120.0), h_px=(10.0, 30.0), random_state=None):
+        self.n = n
+        self.w_px = w_px
+        self.h_px = h_px
+        self.random_state = random_state
+
+    def predict(self, obs) -> list[GraspRectangle]:
+        if obs.get("seed") is not None:
+            rng = np.random.default_rng(obs["seed"])
+        else:
+            if not hasattr(self, "rng_"):
+                self.rng_ = np.random.default_rng(self.random_state)
+            rng = self.rng_
+        H, W = np.asarray(obs["depth"]).shape
+        return [
+            GraspRectangle(rng.uniform(0, W - 1), rng.uniform(0, H - 1),
+                           rng.uniform(-np.pi / 2, np.pi / 2), rng.uniform(*self.w_px),
+                           rng.uniform(*self.h_px))
+            for _ in range(self.n)
+        ]
+
+
+def object_mask_from_depth(depth, valid, min_height: float = 0.006, stride: int = 4,
+                           iterations: int = 4) -> np.ndarray:
+    """Pixels standing above the dominant plane (the table), largest connected blob.
+
+    For a plane ``n . X = d`` seen by a pinhole camera, ``1/z = a u + b v + c``; the plane is
+    fitted robustly (least squares, re-fitted on the inliers) on a ``stride`` subsampled grid.
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W), float, metres (0 where missing)
+    valid : ndarray of shape (H, W)
+    min_height : float
+        Metres an object pixel stands in front of the plane (along the ray).
+
+    Returns
+    -------
+    ndarray of shape (H, W), bool
+        Empty when nothing stands out.
+    """
+    depth = np.asarray(depth, dtype=np.float64)
+    valid = np.asarray(valid).astype(bool) & (depth > 0)
+    H, W = depth.shape
+    if valid.sum() < 50:
+        return np.zeros((H, W), dtype=bool)
+    vs, us = np.mgrid[0:H:stride, 0:W:stride]
+    sub_valid = valid[::stride, ::stride]
+    u, v = us[sub_valid].astype(float), vs[sub_valid].astype(float)
+    inv = 1.0 / depth[::stride, ::stride][sub_valid]
+    A = np.column_stack([u, v, np.ones_like(u)])
+    keep = np.ones(len(u), dtype=bool)
+    coef = np.zeros(3)
+    for _ in range(iterations):
+        coef, *_ = np.linalg.lstsq(A[keep], inv[keep], rcond=None)
+        z_plane = 1.0 / np.maximum(A @ coef, 1e-6)
+        resid = z_plane - 1.0 / inv
+        keep = np.abs(resid) < max(3 * np.median(np.abs(resid[keep])), 0.002)
+    vv, uu = np.mgrid[0:H, 0:W]
+    z_plane = 1.0 / np.maximum(coef[0] * uu + coef[1] * vv + coef[2], 1e-6)
+    mask = valid & (z_plane - depth > min_height)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return np.zeros((H, W), dtype=bool)
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    if stats[best, cv2.CC_STAT_AREA] < 20:
+        return np.zeros((H, W), dtype=bool)
+    return labels == best
+
+
+class MaskPCADetector:
+    """Grasp across the minor axis of the depth-segmented object, at its centroid.
+
+    Parameters
+    ----------
+    jaw_px : float
+        Jaw size ``h``, pixels.
+    margin_px : float
+        Added to the mask's extent for the opening ``w``.
+    min_height : float
+        Metres above the table for a pixel to count as object.
+    """
+
+    requires_labels = False
+
+    def __init__(self, jaw_px: float = 18.0, margin_px: float = 6.0, min_height: float = 0.006):
+        self.jaw_px = jaw_px
+        self.margin_px = margin_px
+        self.min_height = min_height
+
+    def predict(self, obs) -> list[GraspRectangle]:
+        mask = object_mask_from_depth(obs["depth"], obs["depth_valid"], self.min_height)
+        if mask.sum() < 20:
+            return []
+        c, theta, xy = mask_axes(mask)
+        w = extent_along(xy, c, theta, self.jaw_px / 2) + self.margin_px
+        return [GraspRectangle(float(c[0]), float(c[1]), theta, max(w, 4.0), self.jaw_px)]
+
+
+class OracleDetector:
+    """The best physics-labelled positive of the scene (``obs["positives"]``, ranked)."""
+
+    requires_labels = True
+
+    def predict(self, obs) -> list[GraspRectangle]:
+        if "positives" not in obs:
+            raise ValueError(
+                "the oracle detector needs physics-labelled positives in obs['positives'] "
+                "(run it through graspsim.trials, which labels every scene)"
+            )
+        return list(obs["positives"])
+
+
+DETECTORS = {
+    "random": RandomDetector,
+    "mask-pca": MaskPCADetector,
+    "oracle": OracleDetector,
+}
+
+
+def load_detector(name_or_path):
+    """A detector from a built-in name or a saved model path.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        ``"random"``, ``"mask-pca"``, ``"oracle"``, or the path of a saved model.
+
+    Raises
+    ------
+    FileNotFoundError
+        If it is neither a built-in name nor an existing path.
+    ValueError
+        If it is a path: loading saved models arrives with the DLSR detector issue.
+    """
+    key = str(name_or_path)
+    if key in DETECTORS:
+        return DETECTORS[key]()
+    path = Path(key)
+    if path.exists():
+        raise ValueError(
+            f"cannot load detector model {path}: loading saved models is not supported yet "
+            f"(built-in detectors: {', '.join(DETECTORS)})"
+        )
+    raise FileNotFoundError(
+        f"unknown detector {key!r}: not one of {', '.join(DETECTORS)} and no such model file"
+    )

@@ -1,0 +1,205 @@
+"""``graspsim/Grasp-v0``: one planar grasp per step, scored by physics.
+
+Observation (``Dict``):
+
+* ``rgb``: ``Box(0, 255, (480, 640, 3), uint8)``
+* ``depth``: ``Box(0, 10, (480, 640), float32)``, metres, 0 where missing (Kinect-like noise)
+* ``depth_valid``: ``Box(0, 1, (480, 640), uint8)``
+
+Action: ``Box(5)`` = ``(x, y, theta, w, h)`` in pixels and radians (the
+:class:`~dlsr.rectangles.GraspRectangle` convention); values are clipped to the action space.
+
+Reward 1.0 when the grasp lifts an object (>= 10 cm, held by both fingers), else 0.0.
+``info``: ``success``, ``failure_reason`` (None on success), ``lift_height`` (m), ``gripper_pose``
+(the executed 4x4 ``T_world_tcp``, or None when nothing was executed), ``object`` (the name of
+the object between the jaws, or None), and ``rectangle_metric`` (bool) when the episode was reset
+with ``options={"label": True}``: the action against the scene's physics-labelled positives
+(also given as ``info["positives"]`` by ``reset``).
+
+Default episode: one object, one grasp (``terminated`` after the step). ``declutter=True``:
+``n_objects`` objects; a grasped object is removed, the others settle and a new observation is
+rendered; the episode terminates when the table is empty and is truncated by the
+``max_episode_steps`` of the registration. Every random value comes from ``self.np_random``
+(seeded by ``reset(seed=...)``), so the same seed gives the same observations and outcomes.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from dlsr.metrics import rectangle_metric
+from dlsr.rectangles import GraspRectangle
+
+from .execution import run_grasp
+from .grasp import rectangle_to_grasp
+from .labelling import label_rectangles, rank_positives, sample_candidates
+from .scene import PlacedObject, Scene, build_scene, capture, link_pose, make_scene, settle
+from .sim import Simulation
+
+__all__ = ["GraspEnv"]
+
+H, W = 480, 640
+
+
+class GraspEnv(gym.Env):
+    """Planar grasping with simulation in the loop (see the module docstring).
+
+    Parameters
+    ----------
+    render_mode : {"rgb_array"} or None
+    objects : {"train", "test", "all"} or list of ObjectSpec
+    n_objects : int
+        Objects per scene (default 1; 5 in declutter mode when not given).
+    declutter : bool
+    n_candidates : int
+        Candidates executed to label a scene when ``reset(options={"label": True})``.
+    noise : graspsim.camera.DepthNoise or None
+        None: the camera's default Kinect-like noise.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+
+    def __init__(self, render_mode=None, objects="test", n_objects=None, declutter=False,
+                 n_candidates=32, noise=None):
+        from .trials import resolve_objects
+
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.render_mode = render_mode
+        self.specs = resolve_objects(objects)
+        self.declutter = bool(declutter)
+        self.n_objects = (5 if declutter else 1) if n_objects is None else int(n_objects)
+        self.n_candidates = int(n_candidates)
+        self.noise = noise
+        self.observation_space = spaces.Dict({
+            "rgb": spaces.Box(0, 255, (H, W, 3), np.uint8),
+            "depth": spaces.Box(0.0, 10.0, (H, W), np.float32),
+            "depth_valid": spaces.Box(0, 1, (H, W), np.uint8),
+        })
+        self.action_space = spaces.Box(
+            low=np.array([0.0, 0.0, -np.pi / 2, 1.0, 1.0], dtype=np.float32),
+            high=np.array([W - 1.0, H - 1.0, np.pi / 2, 200.0, 100.0], dtype=np.float32),
+            dtype=np.float32,
+        )
+        self.sim = Simulation()
+        self._scene = None
+        self._frame = None
+        self._positives = None
+
+    # --- helpers --------------------------------------------------------------------------
+    def _observe(self):
+        bodies = build_scene(self.sim, self._scene)
+        self._frame = capture(self.sim, self._scene, bodies, self.np_random, noise=self.noise)
+        self._bodies = bodies
+        f = self._frame
+        return {
+            "rgb": f.rgb.copy(),
+            "depth": np.asarray(f.depth, dtype=np.float32).copy(),
+            "depth_valid": np.asarray(f.depth_valid, dtype=np.uint8).copy(),
+        }
+
+    def _label(self):
+        f = self._frame
+        cands = sample_candidates(f.segmentation, self._bodies.objects, self.np_random,
+                                  self.n_candidates, depth=f.depth_clean)
+        # Labelled at the action space's float32 precision, so that stepping with a positive
+        # executes exactly the labelled grasp (light objects in marginal grasps are chaotic).
+        cands = [GraspRectangle(*r.as_array().astype(np.float32).astype(np.float64))
+                 for r in cands]
+        labelled = label_rectangles(self.sim, self._scene, f, cands)
+        self._positives = rank_positives(labelled)
+
+    # --- gymnasium API ---------------------------------------------------------------------
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        options = options or {}
+        self._scene = make_scene(self.sim, self.specs, self.np_random, n_objects=self.n_objects,
+                                 spread=0.05 if self.n_objects == 1 else 0.1)
+        self._label_scenes = bool(options.get("label", False))
+        self._positives = None
+        obs = self._observe()
+        info = {"objects": [o.spec.name for o in self._scene.objects],
+                "redraws": list(self._scene.redraws)}
+        if self._label_scenes:
+            self._label()
+            info["positives"] = np.array([r.as_array() for r in self._positives],
+                                         dtype=np.float32).reshape(-1, 5)
+        return obs, info
+
+    def step(self, action):
+        if self._scene is None:
+            raise RuntimeError("call reset() before step()")
+        a = np.clip(np.asarray(action, dtype=np.float64).reshape(5),
+                    self.action_space.low, self.action_space.high)
+        rect = GraspRectangle(*a)
+        f = self._frame
+        grasp = rectangle_to_grasp(rect, f.depth, f.depth_valid, f.intrinsics, f.T_world_cam)
+        res = run_grasp(self.sim, self._scene, grasp)
+        info = {
+            "success": bool(res.success),
+            "failure_reason": res.reason,
+            "lift_height": float(res.lift_height),
+            "gripper_pose": None if res.T_world_tcp is None else np.array(res.T_world_tcp),
+            "object": None if res.object_index is None
+            else self._scene.objects[res.object_index].spec.name,
+        }
+        if self._positives is not None:
+            info["rectangle_metric"] = bool(rectangle_metric(rect, self._positives))
+        reward = 1.0 if res.success else 0.0
+        if not self.declutter:
+            terminated = True
+            obs = {
+                "rgb": f.rgb.copy(),
+                "depth": np.asarray(f.depth, dtype=np.float32).copy(),
+                "depth_valid": np.asarray(f.depth_valid, dtype=np.uint8).copy(),
+            }
+            return obs, reward, terminated, False, info
+        # Declutter: the grasped object leaves; the rest settle where the grasp left them.
+        c = self.sim.client
+        kept = []
+        executed = res.T_world_tcp is not None
+        for i, (o, b) in enumerate(zip(self._scene.objects, self._bodies_after(executed),
+                                       strict=True)):
+            if res.success and i == res.object_index:
+                continue
+            pos, orn = link_pose(c, b) if b is not None else (o.position, o.orientation)
+            if max(abs(pos[0]), abs(pos[1])) > 0.45 or pos[2] < self._scene.table_z - 0.01:
+                continue  # pushed off the table
+            kept.append(PlacedObject(o.spec, pos, orn))
+        self._scene = self._settled(Scene(kept, self._scene.table_z, self._scene.table_rgba))
+        terminated = len(self._scene.objects) == 0
+        obs = self._observe()
+        if self._label_scenes and not terminated:
+            self._label()
+        return obs, reward, terminated, False, info
+
+    def _bodies_after(self, executed):
+        """Body ids of the scene objects after an execution (None where nothing ran)."""
+        if not executed:
+            return [None] * len(self._scene.objects)
+        # run_grasp rebuilt the scene: table first, then the objects in order.
+        c = self.sim.client
+        ids = [c.getBodyUniqueId(i) for i in range(c.getNumBodies())]
+        return ids[1:1 + len(self._scene.objects)]
+
+    def _settled(self, scene):
+        """Let ``scene`` settle from its current poses and read the poses back."""
+        if not scene.objects:
+            return scene
+        bodies = build_scene(self.sim, scene)
+        settle(self.sim, bodies.objects, max_time=2.0)
+        objs = [PlacedObject(o.spec, *link_pose(self.sim.client, b))
+                for o, b in zip(scene.objects, bodies.objects, strict=True)]
+        return Scene(objs, scene.table_z, scene.table_rgba, list(scene.redraws))
+
+    def render(self):
+        if self.render_mode == "rgb_array":
+            return None if self._frame is None else self._frame.rgb.copy()
+        return None
+
+    def close(self):
+        if getattr(self, "sim", None) is not None:
+            self.sim.close()
+            self.sim = None

@@ -1,0 +1,201 @@
+"""From an image grasp rectangle to a 6-DoF gripper pose (pure numpy, no pybullet).
+
+Conventions
+-----------
+* Units: metres and radians; pixels for the rectangle.
+* ``T_world_cam`` (4x4) maps camera coordinates (OpenCV: x right, y down, z forward) to world
+  coordinates; ``T_world_grasp`` maps grasp-frame coordinates to world coordinates.
+* Grasp frame (= the gripper's TCP frame, see :mod:`graspsim.gripper`): origin at the grasp
+  centre, ``z`` the approach direction (the camera's optical axis), ``x`` the closing direction
+  (the rectangle's ``theta`` mapped into the plane perpendicular to the optical axis),
+  ``y = z x x``.
+
+The grasp centre is the rectangle centre back-projected at a robust depth -- the median of the
+valid depth in the rectangle's central region (the rectangle shrunk to half its opening and half
+its jaw size) -- pushed ``depth_offset`` further along the approach so the pads straddle the
+object's top rather than touch it. The opening is ``w z / f`` (the rectangle's opening measured
+at that depth) plus ``margin``. When the central region holds no valid depth at all, the fallback
+is explicit: no pose is computed and the grasp carries the failure reason
+``"depth missing at the centre"``; when ``w z / f`` exceeds the gripper's largest opening, the
+pose is computed but the reason is ``"too wide for the gripper"``. Executors do not run a grasp
+that carries a failure reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dlsr.rectangles import GraspRectangle
+
+__all__ = [
+    "Grasp",
+    "rectangle_to_grasp",
+    "central_depth",
+    "DEPTH_MISSING",
+    "TOO_WIDE",
+]
+
+DEPTH_MISSING = "depth missing at the centre"
+TOO_WIDE = "too wide for the gripper"
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """A parallel-jaw grasp in the world.
+
+    Attributes
+    ----------
+    T_world_grasp : ndarray of shape (4, 4) or None
+        Grasp (TCP) pose; None when no depth was available (see ``failure``).
+    opening : float
+        Opening to command before closing, metres (``width + margin``, at most ``max_opening``).
+    width : float
+        The rectangle's opening measured at the grasp depth, ``w z / f``, metres.
+    depth : float
+        Camera-frame depth of the surface under the centre, metres (nan when missing).
+    rect : GraspRectangle
+        The rectangle it came from.
+    failure : str or None
+        ``"depth missing at the centre"`` or ``"too wide for the gripper"``; None when executable.
+    """
+
+    T_world_grasp: np.ndarray | None
+    opening: float
+    width: float
+    depth: float
+    rect: GraspRectangle
+    failure: str | None = None
+
+    @property
+    def approach(self) -> np.ndarray | None:
+        """Unit approach direction in the world, (3,)."""
+        return None if self.T_world_grasp is None else self.T_world_grasp[:3, 2].copy()
+
+    @property
+    def position(self) -> np.ndarray | None:
+        return None if self.T_world_grasp is None else self.T_world_grasp[:3, 3].copy()
+
+    def to_dict(self) -> dict:
+        """JSON-friendly summary (pose as a nested list)."""
+        return {
+            "T_world_grasp": None if self.T_world_grasp is None
+            else np.round(self.T_world_grasp, 6).tolist(),
+            "opening": round(float(self.opening), 6),
+            "width": round(float(self.width), 6),
+            "depth": None if not np.isfinite(self.depth) else round(float(self.depth), 6),
+            "failure": self.failure,
+        }
+
+
+def _intrinsic_matrix(intrinsics) -> np.ndarray:
+    K = getattr(intrinsics, "K", intrinsics)
+    K = np.asarray(K, dtype=float)
+    if K.shape != (3, 3):
+        raise ValueError(f"intrinsics must provide a 3x3 K, got shape {K.shape}")
+    return K
+
+
+def central_depth(rect: GraspRectangle, depth, valid, fraction: float = 0.5) -> float:
+    """Median valid depth inside the rectangle's central region.
+
+    Parameters
+    ----------
+    rect : GraspRectangle
+    depth : ndarray of shape (H, W), float
+        Metres.
+    valid : ndarray of shape (H, W), bool
+    fraction : float
+        The central region is the rectangle scaled by this factor about its centre (at least the
+        centre pixel is always included).
+
+    Returns
+    -------
+    float
+        Metres; ``nan`` when the region has no valid pixel.
+    """
+    depth = np.asarray(depth)
+    valid = np.asarray(valid, dtype=bool)
+    if depth.shape != valid.shape or depth.ndim != 2:
+        raise ValueError(f"depth {depth.shape} and valid {valid.shape} must be the same (H, W)")
+    H, W = depth.shape
+    half_u = max(rect.w * fraction / 2, 0.5)
+    half_v = max(rect.h * fraction / 2, 0.5)
+    r = int(np.ceil(np.hypot(half_u, half_v))) + 1
+    x0, x1 = max(int(np.floor(rect.x)) - r, 0), min(int(np.ceil(rect.x)) + r + 1, W)
+    y0, y1 = max(int(np.floor(rect.y)) - r, 0), min(int(np.ceil(rect.y)) + r + 1, H)
+    if x0 >= x1 or y0 >= y1:
+        return float("nan")
+    ys, xs = np.mgrid[y0:y1, x0:x1]
+    dx, dy = xs - rect.x, ys - rect.y
+    c, s = np.cos(rect.theta), np.sin(rect.theta)
+    along = dx * c - dy * s  # image closing direction is (cos, -sin) in (x, y)
+    across = dx * s + dy * c
+    inside = (np.abs(along) <= half_u) & (np.abs(across) <= half_v)
+    sel = inside & valid[y0:y1, x0:x1] & (depth[y0:y1, x0:x1] > 0)
+    if not sel.any():
+        return float("nan")
+    return float(np.median(depth[y0:y1, x0:x1][sel]))
+
+
+def rectangle_to_grasp(
+    rect: GraspRectangle,
+    depth,
+    valid,
+    intrinsics,
+    T_world_cam,
+    depth_offset: float = 0.015,
+    margin: float = 0.01,
+    max_opening: float = 0.08,
+) -> Grasp:
+    """Turn an image rectangle into a gripper pose.
+
+    Parameters
+    ----------
+    rect : GraspRectangle
+        Pixels and radians (``x`` column, ``y`` row, ``theta`` closing direction CCW as displayed).
+    depth : ndarray of shape (H, W), float32
+        Metres, 0 where missing.
+    valid : ndarray of shape (H, W), bool
+    intrinsics : CameraIntrinsics or ndarray of shape (3, 3)
+        Anything with a ``K`` attribute, or ``K`` itself.
+    T_world_cam : ndarray of shape (4, 4)
+    depth_offset : float
+        Metres the grasp centre lies beyond the surface, along the approach.
+    margin : float
+        Metres added to the measured width for the commanded opening.
+    max_opening : float
+        Metres; the gripper's largest opening.
+
+    Returns
+    -------
+    Grasp
+        With ``failure="depth missing at the centre"`` and no pose when the central region of the
+        rectangle has no valid depth; with ``failure="too wide for the gripper"`` when
+        ``w z / f > max_opening``.
+    """
+    K = _intrinsic_matrix(intrinsics)
+    T_world_cam = np.asarray(T_world_cam, dtype=float)
+    if T_world_cam.shape != (4, 4):
+        raise ValueError(f"T_world_cam must be 4x4, got shape {T_world_cam.shape}")
+    z = central_depth(rect, depth, valid)
+    if not np.isfinite(z):
+        return Grasp(None, 0.0, float("nan"), float("nan"), rect, DEPTH_MISSING)
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    # Closing direction in the camera frame: the image direction (cos, -sin) back-projected onto
+    # the plane perpendicular to the optical axis at depth z.
+    c, s = np.cos(rect.theta), np.sin(rect.theta)
+    d_cam = np.array([c / fx, -s / fy, 0.0])
+    width = float(rect.w * z * np.linalg.norm(d_cam))  # = w z / f when fx = fy
+    x_cam = d_cam / np.linalg.norm(d_cam)
+    z_cam = np.array([0.0, 0.0, 1.0])
+    y_cam = np.cross(z_cam, x_cam)
+    p_cam = z * np.array([(rect.x - cx) / fx, (rect.y - cy) / fy, 1.0])
+    T_cam_grasp = np.eye(4)
+    T_cam_grasp[:3, 0], T_cam_grasp[:3, 1], T_cam_grasp[:3, 2] = x_cam, y_cam, z_cam
+    T_cam_grasp[:3, 3] = p_cam + depth_offset * z_cam
+    T_world_grasp = T_world_cam @ T_cam_grasp
+    opening = float(min(width + margin, max_opening))
+    failure = TOO_WIDE if width > max_opening else None
+    return Grasp(T_world_grasp, opening, width, float(z), rect, failure)

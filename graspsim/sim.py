@@ -1,0 +1,91 @@
+"""A pybullet simulator wrapper that owns its own connection.
+
+Every :class:`Simulation` holds a private ``BulletClient`` in DIRECT mode (rendering through
+TinyRenderer, no display); there is no global connection, so several instances can live in one
+process (and one per worker process in parallel runs).
+
+Determinism: a scene is always rebuilt from scratch with ``resetSimulation`` followed by the same
+loads in the same order (see :func:`graspsim.scene.build_scene`), and the physics parameters are
+set again after every reset, including ``deterministicOverlappingPairs``. Given the same seed and
+the same commands the result is bit-for-bit the same; ``restoreState`` is not relied upon.
+"""
+
+from __future__ import annotations
+
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+__all__ = ["Simulation", "TIME_STEP"]
+
+TIME_STEP = 1.0 / 240.0  #: s; pybullet's default and the step VGN uses.
+
+
+class Simulation:
+    """A private pybullet world.
+
+    Parameters
+    ----------
+    time_step : float
+        Physics step, seconds (default 1/240 s).
+    solver_iterations : int
+        Constraint-solver iterations per step.
+    gravity : float
+        Downward gravitational acceleration, m/s^2.
+
+    Attributes
+    ----------
+    client : pybullet_utils.bullet_client.BulletClient
+        The connection; pass it to :func:`graspsim.objects.load_object` and the camera.
+    steps : int
+        Physics steps taken since the last :meth:`reset`.
+    """
+
+    def __init__(self, time_step: float = TIME_STEP, solver_iterations: int = 50,
+                 gravity: float = 9.81):
+        self.time_step = time_step
+        self.solver_iterations = solver_iterations
+        self.gravity = gravity
+        self.client = BulletClient(connection_mode=pybullet.DIRECT)
+        self.steps = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Empty the world (``resetSimulation``) and set the physics parameters again."""
+        c = self.client
+        c.resetSimulation()
+        c.setGravity(0.0, 0.0, -self.gravity)
+        c.setPhysicsEngineParameter(
+            fixedTimeStep=self.time_step,
+            numSolverIterations=self.solver_iterations,
+            numSubSteps=0,
+            deterministicOverlappingPairs=1,
+            enableFileCaching=1,
+        )
+        self.steps = 0
+
+    def step(self, n: int = 1) -> None:
+        """Advance the world by ``n`` steps of ``time_step`` seconds."""
+        for _ in range(n):
+            self.client.stepSimulation()
+        self.steps += n
+
+    def close(self) -> None:
+        """Disconnect (idempotent)."""
+        if getattr(self, "client", None) is not None:
+            try:
+                self.client.disconnect()
+            except pybullet.error:
+                pass
+            self.client = None
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass

@@ -1,0 +1,385 @@
+"""Grasp trials: a detector's best rectangle executed by the simulated gripper, scored by physics
+and by the rectangle metric on the same scenes.
+
+Every trial ``i`` of a run with seed ``s`` gets its own generator streams from
+``SeedSequence(s, spawn_key=(i,))`` (scene, camera, labelling candidates, detector seed), and
+every scene is built from scratch in the worker's own :class:`~graspsim.sim.Simulation`, so a
+trial's result depends only on ``(s, i)``: the same for any ``n_jobs``, for any ``n``, and on
+resume.
+
+Output folder (``out``):
+
+* ``trials.jsonl``: one JSON object per trial, appended and flushed as each trial finishes.
+  Rerunning with the same arguments after a kill drops a torn last line, keeps every complete
+  record and runs only the missing trial indices (none repeated, none lost). A different
+  configuration in an existing folder is refused.
+* ``config.json``: the run's arguments.
+* ``summary.json`` and ``summary.md``: physical success rate with a Wilson 95 % interval,
+  rectangle-metric accuracy on the same trials, the 2x2 table of metric verdict against physical
+  outcome, failure reasons, trials per second.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dlsr.metrics import rectangle_metric
+
+from .detectors import load_detector
+from .execution import ExecutionParams, run_grasp
+from .grasp import rectangle_to_grasp
+from .labelling import label_rectangles, rank_positives, sample_candidates
+from .objects import ObjectSpec, builtin_objects
+from .scene import build_scene, capture, make_scene
+from .sim import Simulation
+
+__all__ = [
+    "TrialConfig",
+    "run_trial",
+    "run_trials",
+    "summarize",
+    "wilson_interval",
+    "resolve_objects",
+    "trial_streams",
+]
+
+log = logging.getLogger(__name__)
+
+NO_PROPOSAL = "no grasp proposed"
+
+
+@dataclass(frozen=True)
+class TrialConfig:
+    """What every trial of a run shares.
+
+    Attributes
+    ----------
+    n_candidates : int
+        Candidates proposed and executed to label each scene (0: no labelling, so no
+        rectangle-metric verdict and no oracle).
+    n_objects : int
+        Objects per scene (1: Cornell-like).
+    label_with_clean_depth : bool
+        Turn labelling candidates into poses with the noise-free depth (ground truth
+        independent of sensor dropout) instead of the observed depth.
+    """
+
+    n_candidates: int = 32
+    n_objects: int = 1
+    label_with_clean_depth: bool = False
+
+
+def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score interval for a binomial proportion (95 % by default).
+
+    Returns ``(nan, nan)`` for ``n == 0``.
+    """
+    if n == 0:
+        return (float("nan"), float("nan"))
+    p = k / n
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return (float(max(0.0, centre - half)), float(min(1.0, centre + half)))
+
+
+def resolve_objects(objects) -> list[ObjectSpec]:
+    """``"train"``, ``"test"``, ``"all"`` (built-in set) or a list of ObjectSpec."""
+    if isinstance(objects, str):
+        specs = builtin_objects(objects)
+    else:
+        specs = list(objects)
+    if not specs:
+        raise ValueError(f"no objects in {objects!r}")
+    return specs
+
+
+def trial_streams(seed: int, index: int) -> dict:
+    """Independent generators (scene, camera, labels) and a detector seed for one trial."""
+    ss = np.random.SeedSequence(seed, spawn_key=(index,))
+    scene_ss, camera_ss, label_ss, det_ss = ss.spawn(4)
+    return {
+        "scene": np.random.default_rng(scene_ss),
+        "camera": np.random.default_rng(camera_ss),
+        "label": np.random.default_rng(label_ss),
+        "detector_seed": int(det_ss.generate_state(1)[0]),
+    }
+
+
+_WORKER = {}
+
+
+def _worker_sim() -> Simulation:
+    """One simulator per worker process (re-created after a fork)."""
+    pid = os.getpid()
+    sim = _WORKER.get(pid)
+    if sim is None:
+        sim = Simulation()
+        _WORKER.clear()
+        _WORKER[pid] = sim
+    return sim
+
+
+def _rect_list(r) -> list[float]:
+    return [round(float(v), 4) for v in r.as_array()]
+
+
+def run_trial(sim, specs, detector, seed: int, index: int,
+              config: TrialConfig = TrialConfig(),
+              params: ExecutionParams | None = None) -> dict:
+    """One trial: scene, observation, (labels), detection, execution, verdict.
+
+    Returns
+    -------
+    dict
+        The JSON record (``index``, ``seed``, ``object``, ``rectangle``, ``pose``, ``success``,
+        ``reason``, ``lift_height``, ``metric`` (bool or None when unlabelled), ``n_positives``,
+        ``n_labelled``, ``seconds``).
+    """
+    t0 = time.perf_counter()
+    st = trial_streams(seed, index)
+    scene = make_scene(sim, specs, st["scene"], n_objects=config.n_objects)
+    bodies = build_scene(sim, scene)
+    frame = capture(sim, scene, bodies, st["camera"])
+    obs = {"rgb": frame.rgb, "depth": frame.depth,
+           "depth_valid": frame.depth_valid.astype(np.uint8), "seed": st["detector_seed"]}
+    positives, n_labelled = None, 0
+    if config.n_candidates > 0:
+        cands = sample_candidates(frame.segmentation, bodies.objects, st["label"],
+                                  config.n_candidates, depth=frame.depth_clean)
+        kw = {}
+        if config.label_with_clean_depth:
+            kw = {"depth": frame.depth_clean, "depth_valid": frame.depth_clean > 0}
+        labelled = label_rectangles(sim, scene, frame, cands, params, **kw)
+        positives = rank_positives(labelled)
+        n_labelled = len(cands)
+        obs["positives"] = positives
+    elif getattr(detector, "requires_labels", False):
+        raise ValueError("this detector needs labelled scenes: use n_candidates > 0")
+    rects = detector.predict(obs)
+    record = {
+        "index": index, "seed": seed, "object": [o.spec.name for o in scene.objects],
+        "graspable": all(o.spec.graspable for o in scene.objects),
+        "redraws": scene.redraws, "n_labelled": n_labelled,
+        "n_positives": None if positives is None else len(positives),
+    }
+    if not rects:
+        record.update(rectangle=None, pose=None, success=False, reason=NO_PROPOSAL,
+                      lift_height=0.0, metric=None if positives is None else False)
+    else:
+        rect = rects[0]
+        g = rectangle_to_grasp(rect, frame.depth, frame.depth_valid, frame.intrinsics,
+                               frame.T_world_cam)
+        res = run_grasp(sim, scene, g, params)
+        record.update(
+            rectangle=_rect_list(rect),
+            pose=None if res.T_world_tcp is None else np.round(res.T_world_tcp, 5).tolist(),
+            opening=round(float(g.opening), 5),
+            success=bool(res.success), reason=res.reason,
+            lift_height=round(float(res.lift_height), 5),
+            metric=None if positives is None else bool(rectangle_metric(rect, positives)),
+        )
+    record["seconds"] = round(time.perf_counter() - t0, 4)
+    return record
+
+
+def _trial_task(specs, detector, seed, index, config, params):
+    return run_trial(_worker_sim(), specs, detector, seed, index, config, params)
+
+
+def _read_done(path: Path) -> dict[int, dict]:
+    """Complete records of a JSONL file; a torn last line is dropped and the file rewritten."""
+    if not path.exists():
+        return {}
+    done, good, torn = {}, [], False
+    for line in path.read_text().splitlines():
+        try:
+            rec = json.loads(line)
+            idx = int(rec["index"])
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            torn = True
+            continue
+        if idx not in done:
+            done[idx] = rec
+            good.append(line)
+    if torn or not path.read_text().endswith("\n") and good:
+        log.warning("%s: dropped an incomplete line left by an interrupted run", path)
+        tmp = path.with_suffix(".jsonl.tmp")
+        tmp.write_text("".join(g + "\n" for g in good))
+        tmp.replace(path)
+    return done
+
+
+def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, out=None,
+               n_jobs: int = 1, config: TrialConfig = TrialConfig(),
+               params: ExecutionParams | None = None, progress: bool = False) -> dict:
+    """Run (or finish) ``n`` trials and write records and summaries to ``out``.
+
+    Parameters
+    ----------
+    detector : str or object
+        A built-in name (``random``, ``mask-pca``, ``oracle``), a model path, or an object with
+        ``predict(obs)``.
+    objects : {"train", "test", "all"} or list of ObjectSpec
+    n : int
+        Trials (indices ``0 .. n-1``).
+    seed : int
+    out : str or Path or None
+        Output folder; None keeps everything in memory (no resume).
+    n_jobs : int
+        Worker processes (joblib loky); results do not depend on it.
+    config : TrialConfig
+    params : ExecutionParams or None
+    progress : bool
+
+    Returns
+    -------
+    dict
+        The summary (see :func:`summarize`), with ``records`` sorted by index.
+    """
+    from .executor import Executor
+
+    det_name = detector if isinstance(detector, str | Path) else type(detector).__name__
+    det = load_detector(detector) if isinstance(detector, str | Path) else detector
+    specs = resolve_objects(objects)
+    if n < 0:
+        raise ValueError(f"n must be >= 0, got {n}")
+    meta = {"detector": str(det_name), "objects": objects if isinstance(objects, str)
+            else [s.name for s in specs], "seed": seed, "config": asdict(config)}
+    done: dict[int, dict] = {}
+    jsonl = None
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        cfg_path = out / "config.json"
+        if cfg_path.exists():
+            old = json.loads(cfg_path.read_text())
+            if {k: old.get(k) for k in meta} != json.loads(json.dumps(meta)):
+                raise ValueError(
+                    f"{out} holds trials of another configuration ({cfg_path}); "
+                    f"use a new folder"
+                )
+        cfg_path.write_text(json.dumps(meta, indent=2) + "\n")
+        jsonl = out / "trials.jsonl"
+        done = _read_done(jsonl)
+    todo = [i for i in range(n) if i not in done]
+    if done:
+        log.info("resuming: %d of %d trials already done", n - len(todo), n)
+    t0 = time.perf_counter()
+    new = 0
+    if todo:
+        ex = Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
+                      progress=progress)
+        tasks = [(specs, det, seed, i, config, params) for i in todo]
+        fh = open(jsonl, "a") if jsonl is not None else None  # noqa: SIM115
+        try:
+            for rec in ex.imap(_trial_task, tasks, desc="trials", star=True):
+                done[rec["index"]] = rec
+                new += 1
+                if fh is not None:
+                    fh.write(json.dumps(rec) + "\n")
+                    fh.flush()
+        finally:
+            if fh is not None:
+                fh.close()
+    wall = time.perf_counter() - t0
+    records = [done[i] for i in sorted(done) if i < n]
+    summary = summarize(records)
+    summary.update(meta)
+    summary["trials_per_second"] = (new / wall) if new and wall > 0 else None
+    summary["n_jobs"] = n_jobs
+    if out is not None:
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (out / "summary.md").write_text(summary_markdown(summary))
+    summary["records"] = records
+    return summary
+
+
+def summarize(records: list[dict]) -> dict:
+    """Success rate (Wilson 95 %), metric accuracy, verdict-vs-outcome table, failure reasons."""
+    n = len(records)
+    k = sum(bool(r["success"]) for r in records)
+    lo, hi = wilson_interval(k, n)
+    verdicts = [r for r in records if r.get("metric") is not None]
+    table = {"metric_true": {"success": 0, "failure": 0},
+             "metric_false": {"success": 0, "failure": 0}}
+    for r in verdicts:
+        table["metric_true" if r["metric"] else "metric_false"][
+            "success" if r["success"] else "failure"] += 1
+    reasons: dict[str, int] = {}
+    for r in records:
+        if not r["success"]:
+            reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
+    m = len(verdicts)
+    mk = sum(bool(r["metric"]) for r in verdicts)
+    per_object: dict[str, list[int]] = {}
+    for r in records:
+        name = "+".join(r["object"])
+        per_object.setdefault(name, [0, 0])
+        per_object[name][0] += int(bool(r["success"]))
+        per_object[name][1] += 1
+    seconds = [r.get("seconds", 0.0) for r in records]
+    g = [r for r in records if r.get("graspable", True)]
+    gk = sum(bool(r["success"]) for r in g)
+    return {
+        "n": n,
+        "successes": k,
+        "success_rate": k / n if n else float("nan"),
+        "success_ci95": [lo, hi],
+        "graspable_n": len(g),
+        "graspable_success_rate": gk / len(g) if g else None,
+        "graspable_success_ci95": list(wilson_interval(gk, len(g))) if g else None,
+        "metric_n": m,
+        "metric_accuracy": mk / m if m else None,
+        "metric_ci95": list(wilson_interval(mk, m)) if m else None,
+        "verdict_vs_outcome": table,
+        "agreement": ((table["metric_true"]["success"] + table["metric_false"]["failure"]) / m
+                      if m else None),
+        "failure_reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1])),
+        "per_object": {k_: {"successes": v[0], "n": v[1]} for k_, v in sorted(per_object.items())},
+        "seconds_per_trial": float(np.mean(seconds)) if seconds else None,
+    }
+
+
+def summary_markdown(s: dict) -> str:
+    """The summary as a Markdown report."""
+    def pct(x):
+        return "n/a" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{100 * x:.1f} %"
+
+    t = s["verdict_vs_outcome"]
+    tps = "n/a" if s.get("trials_per_second") is None else f"{s['trials_per_second']:.2f}"
+    lines = [
+        f"# Grasp trials: detector `{s.get('detector')}` on `{s.get('objects')}` objects",
+        "",
+        f"- trials: {s['n']} (seed {s.get('seed')})",
+        f"- physical success: {s['successes']}/{s['n']} = {pct(s['success_rate'])} "
+        f"(Wilson 95 % interval {pct(s['success_ci95'][0])} - {pct(s['success_ci95'][1])})",
+        f"- on objects the manifest marks graspable: {pct(s['graspable_success_rate'])} "
+        f"(n = {s['graspable_n']}"
+        + (f", Wilson 95 % {pct(s['graspable_success_ci95'][0])} - "
+           f"{pct(s['graspable_success_ci95'][1])})" if s["graspable_n"] else ")"),
+        f"- rectangle-metric accuracy on the same trials: {pct(s['metric_accuracy'])} "
+        f"(n = {s['metric_n']})",
+        f"- metric/physics agreement: {pct(s['agreement'])}",
+        f"- trials per second (this run): {tps} with {s.get('n_jobs')} job(s); "
+        f"mean {s['seconds_per_trial'] or 0:.2f} s per trial per worker",
+        "",
+        "| rectangle metric \\ physics | success | failure |",
+        "|---|---|---|",
+        f"| correct | {t['metric_true']['success']} | {t['metric_true']['failure']} |",
+        f"| wrong | {t['metric_false']['success']} | {t['metric_false']['failure']} |",
+        "",
+        "| failure reason | trials |",
+        "|---|---|",
+    ]
+    lines += [f"| {k} | {v} |" for k, v in s["failure_reasons"].items()]
+    lines += ["", "| object | successes | trials |", "|---|---|---|"]
+    lines += [f"| {k} | {v['successes']} | {v['n']} |" for k, v in s["per_object"].items()]
+    return "\n".join(lines) + "\n"

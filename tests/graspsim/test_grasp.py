@@ -1,0 +1,134 @@
+"""rectangle_to_grasp: pure geometry, no pybullet."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dlsr.rectangles import GraspRectangle
+from graspsim.grasp import DEPTH_MISSING, TOO_WIDE, central_depth, rectangle_to_grasp
+
+F, CX, CY = 550.0, 319.5, 239.5
+K = np.array([[F, 0, CX], [0, F, CY], [0, 0, 1.0]])
+
+
+def look_down(height=0.7):
+    """Camera at (0, 0, height) looking straight down; image x = world x, image y = -world y."""
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[2, 3] = height
+    return T
+
+
+def tilted(rng):
+    """A random camera rotation with the optical axis within 20 degrees of straight down."""
+    a = rng.normal(size=3)
+    a /= np.linalg.norm(a)
+    ang = np.radians(rng.uniform(0, 20))
+    Kx = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    R = np.eye(3) + np.sin(ang) * Kx + (1 - np.cos(ang)) * Kx @ Kx
+    T = look_down(0.7)
+    T[:3, :3] = R @ T[:3, :3]
+    T[:3, 3] = rng.uniform(-0.05, 0.05, 3) + [0, 0, 0.7]
+    return T
+
+
+def flat(z=0.7):
+    return np.full((480, 640), z, np.float32), np.ones((480, 640), bool)
+
+
+def test_centre_opening_and_axes_looking_down():
+    depth, valid = flat(0.7)
+    rect = GraspRectangle(CX, CY, 0.0, 55.0, 20.0)
+    g = rectangle_to_grasp(rect, depth, valid, K, look_down(0.7), depth_offset=0.015,
+                           margin=0.005)
+    assert g.failure is None
+    # w z / f = 55 * 0.7 / 550 = 0.07 m; opening adds the margin.
+    assert g.width == pytest.approx(0.07)
+    assert g.opening == pytest.approx(0.075)
+    # Surface at world z = 0, centre 1.5 cm below it along the (downward) approach.
+    np.testing.assert_allclose(g.position, [0.0, 0.0, -0.015], atol=1e-6)  # float32 depth
+    np.testing.assert_allclose(g.approach, [0.0, 0.0, -1.0], atol=1e-12)
+    # theta = 0: closing along the image x axis = world x.
+    np.testing.assert_allclose(np.abs(g.T_world_grasp[:3, 0]), [1.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_theta_is_counter_clockwise_as_displayed():
+    depth, valid = flat(0.7)
+    # 45 degrees CCW as displayed: image direction (1, -1)/sqrt2 (up and right), i.e. camera
+    # (1, -1, 0)/sqrt2, i.e. world (1, 1, 0)/sqrt2 for this camera (image y = -world y).
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, np.pi / 4, 40.0, 20.0), depth, valid, K,
+                           look_down())
+    np.testing.assert_allclose(g.T_world_grasp[:3, 0], np.array([1, 1, 0]) / np.sqrt(2),
+                               atol=1e-12)
+
+
+def test_pose_is_a_rigid_transform_and_reprojects_to_the_rectangle(rng):
+    for _ in range(10):
+        T_wc = tilted(rng)
+        z = rng.uniform(0.5, 0.8)
+        depth, valid = flat(z)
+        rect = GraspRectangle(rng.uniform(100, 540), rng.uniform(100, 380),
+                              rng.uniform(-1.5, 1.5), rng.uniform(20, 60), 15.0)
+        g = rectangle_to_grasp(rect, depth, valid, K, T_wc, depth_offset=0.0)
+        R = g.T_world_grasp[:3, :3]
+        np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-10)
+        assert np.linalg.det(R) == pytest.approx(1.0)
+        np.testing.assert_allclose(g.approach, T_wc[:3, 2], atol=1e-12)
+        p_cam = np.linalg.inv(T_wc) @ np.append(g.position, 1.0)
+        uv = (K @ p_cam[:3])[:2] / p_cam[2]
+        np.testing.assert_allclose(uv, [rect.x, rect.y], atol=1e-6)
+        assert p_cam[2] == pytest.approx(z)
+        # The closing axis projects onto the rectangle's closing direction.
+        q = np.linalg.inv(T_wc) @ np.append(g.position + 0.01 * g.T_world_grasp[:3, 0], 1.0)
+        d = (K @ q[:3])[:2] / q[2] - uv
+        d /= np.linalg.norm(d)
+        assert abs(d @ [np.cos(rect.theta), -np.sin(rect.theta)]) == pytest.approx(1.0, abs=1e-9)
+
+
+def test_robust_depth_is_the_median_of_the_central_region():
+    depth, valid = flat(0.7)
+    depth[235:245, 315:325] = 0.6  # an object top under the centre
+    depth[238, 318] = 5.0  # an outlier
+    rect = GraspRectangle(CX, CY, 0.0, 20.0, 20.0)  # central region 10 x 10 px
+    assert central_depth(rect, depth, valid) == pytest.approx(0.6)
+
+
+def test_all_masked_centre_falls_back_to_the_failure_reason():
+    depth, valid = flat(0.7)
+    valid[200:280, 280:360] = False
+    depth[~valid] = 0.0
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, 0.3, 40.0, 20.0), depth, valid, K,
+                           look_down())
+    assert g.failure == DEPTH_MISSING
+    assert g.T_world_grasp is None and g.position is None
+    # Valid depth in the outer half of the rectangle is not used: still missing ...
+    g2 = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 150.0, 20.0), depth, valid, K,
+                            look_down())
+    assert g2.failure == DEPTH_MISSING
+    # ... until the central half (here +-50 px) reaches valid pixels.
+    g3 = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 200.0, 20.0), depth, valid, K,
+                            look_down())
+    assert g3.failure in (None, TOO_WIDE) and g3.depth == pytest.approx(0.7)
+
+
+def test_too_wide_for_the_gripper():
+    depth, valid = flat(0.7)
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 100.0, 20.0), depth, valid, K,
+                           look_down())
+    assert g.failure == TOO_WIDE
+    assert g.width == pytest.approx(100 * 0.7 / F)
+    assert g.opening == pytest.approx(0.08)
+
+
+def test_inputs_are_not_mutated_and_bad_shapes_raise():
+    depth, valid = flat(0.7)
+    d0, v0 = depth.copy(), valid.copy()
+    T = look_down()
+    T0 = T.copy()
+    rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid, K, T)
+    assert np.array_equal(depth, d0) and np.array_equal(valid, v0) and np.array_equal(T, T0)
+    with pytest.raises(ValueError, match="4x4"):
+        rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid, K, np.eye(3))
+    with pytest.raises(ValueError, match="same"):
+        rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid[:10], K, T)
