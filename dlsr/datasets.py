@@ -35,6 +35,8 @@ __all__ = [
     "load_cornell",
     "load_jacquard",
     "write_cornell",
+    "write_cornell_image",
+    "write_cornell_mapping",
     "read_mapping",
     "read_cornell_rectangles",
     "read_jacquard_grasps",
@@ -515,35 +517,52 @@ def write_cornell(samples: Sequence[GraspSample], root) -> Path:
         numbers = list(range(len(samples)))
         logger.info("write_cornell: image ids are not all numbers; numbering images from 0000")
     root.mkdir(parents=True, exist_ok=True)
+    lines = [write_cornell_image(s, root, num) for num, s in zip(numbers, samples, strict=True)]
+    write_cornell_mapping(root, [ln for ln in lines if ln is not None])
+    return root
+
+
+def write_cornell_image(sample: GraspSample, root, number: int) -> str | None:
+    """Write one image of the Cornell layout as ``pcd{number:04d}`` (see :func:`write_cornell`).
+
+    Returns
+    -------
+    str or None
+        Its mapping-file line (``image_number object_id image_id``), None without an object id.
+    """
     import tifffile
 
-    lines = []
-    for num, s in zip(numbers, samples, strict=True):
-        stem = f"pcd{num:04d}"
-        folder = root / f"{num // 100:02d}"
-        folder.mkdir(exist_ok=True)
-        depth = np.asarray(s.depth, dtype=np.float32)
-        valid = np.asarray(s.depth_valid, dtype=bool)
-        if depth.shape != s.rgb.shape[:2] or valid.shape != depth.shape:
-            raise ValueError(f"write_cornell: image {s.image_id}: rgb, depth and validity shapes "
-                             f"differ ({s.rgb.shape}, {depth.shape}, {valid.shape})")
-        if np.any(valid & ~(np.isfinite(depth) & (depth > 0))):
-            raise ValueError(f"write_cornell: image {s.image_id}: some valid pixels have depth "
-                             "<= 0 or non-finite; they cannot be written")
-        Image.fromarray(np.asarray(s.rgb, dtype=np.uint8)).save(folder / f"{stem}r.png")
-        tifffile.imwrite(folder / f"{stem}d.tiff", np.where(valid, depth, np.float32(0)))
-        (folder / f"{stem}cpos.txt").write_text(_format_corners(s.positives))
-        (folder / f"{stem}cneg.txt").write_text(_format_corners(s.negatives))
-        if s.object_id is not None:
-            oid = str(s.object_id)
-            if not oid or any(c.isspace() for c in oid):
-                raise ValueError(f"write_cornell: image {s.image_id}: object id {oid!r} must be "
-                                 "one non-empty word")
-            lines.append(f"{num:04d} {oid} {s.image_id}\n")
-    (root / MAPPING_FILENAMES[0]).write_text(
-        "# image_number object_id original_image_id\n" + "".join(lines)
-    )
-    return root
+    s = sample
+    root = Path(root)
+    stem = f"pcd{number:04d}"
+    folder = root / f"{number // 100:02d}"
+    folder.mkdir(parents=True, exist_ok=True)
+    depth = np.asarray(s.depth, dtype=np.float32)
+    valid = np.asarray(s.depth_valid, dtype=bool)
+    if depth.shape != s.rgb.shape[:2] or valid.shape != depth.shape:
+        raise ValueError(f"write_cornell: image {s.image_id}: rgb, depth and validity shapes "
+                         f"differ ({s.rgb.shape}, {depth.shape}, {valid.shape})")
+    if np.any(valid & ~(np.isfinite(depth) & (depth > 0))):
+        raise ValueError(f"write_cornell: image {s.image_id}: some valid pixels have depth "
+                         "<= 0 or non-finite; they cannot be written")
+    Image.fromarray(np.asarray(s.rgb, dtype=np.uint8)).save(folder / f"{stem}r.png")
+    tifffile.imwrite(folder / f"{stem}d.tiff", np.where(valid, depth, np.float32(0)))
+    (folder / f"{stem}cpos.txt").write_text(_format_corners(s.positives))
+    (folder / f"{stem}cneg.txt").write_text(_format_corners(s.negatives))
+    if s.object_id is None:
+        return None
+    oid = str(s.object_id)
+    if not oid or any(c.isspace() for c in oid):
+        raise ValueError(f"write_cornell: image {s.image_id}: object id {oid!r} must be "
+                         "one non-empty word")
+    return f"{number:04d} {oid} {s.image_id}\n"
+
+
+def write_cornell_mapping(root, lines: Sequence[str]) -> Path:
+    """Write the image-to-object mapping file of a Cornell-layout folder."""
+    path = Path(root) / MAPPING_FILENAMES[0]
+    path.write_text("# image_number object_id original_image_id\n" + "".join(lines))
+    return path
 
 
 # --------------------------------------------------------------------------------------------

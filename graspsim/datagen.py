@@ -81,8 +81,12 @@ def _scene_task(specs, seed, index, n_candidates, n_objects):
 
 def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: int = 0,
                  n_candidates: int = 48, n_objects: int = 1, n_jobs: int = 1,
-                 progress: bool = False) -> dict:
-    """Write a synthetic, physics-labelled Cornell dataset.
+                 progress: bool = False, executor=None) -> dict:
+    """Write a synthetic, physics-labelled Cornell dataset; resumes an interrupted run.
+
+    Each scene is written as soon as it is labelled and recorded in ``scenes.jsonl``; a rerun
+    with the same arguments skips the recorded scenes (a different configuration in the same
+    folder is an error).
 
     Parameters
     ----------
@@ -91,48 +95,76 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     objects : {"train", "test", "all"} or list of ObjectSpec
     out : str or Path
         Root folder (``00/pcd0000r.png``, ``pcd0000d.tiff``, ``pcd0000cpos.txt``,
-        ``pcd0000cneg.txt``, ..., ``image_objects.txt``) plus ``labels.json`` (counts).
+        ``pcd0000cneg.txt``, ..., ``image_objects.txt``) plus ``labels.json`` (counts) and
+        ``scenes.jsonl`` (one line per finished scene).
     seed : int
     n_candidates : int
         Rectangles labelled per scene.
     n_objects : int
     n_jobs : int
+        Local worker processes (ignored when ``executor`` is given).
+    executor : graspsim.executor.Executor or None
+        Where scenes run (local cores or a Ray cluster); results do not depend on it.
 
     Returns
     -------
     dict
         Counts: images, positives, negatives, failure reasons, seconds, labelled rectangles/s.
     """
-    from dlsr.datasets import write_cornell
+    from dlsr.datasets import write_cornell_image, write_cornell_mapping
 
     from .executor import Executor
-    from .trials import resolve_objects
+    from .trials import read_done, resolve_objects
 
     if n_scenes < 1:
         raise ValueError(f"n_scenes must be >= 1, got {n_scenes}")
     specs = resolve_objects(objects)
+    root = Path(out)
+    root.mkdir(parents=True, exist_ok=True)
+    meta = {"objects": objects if isinstance(objects, str) else [s.name for s in specs],
+            "seed": seed, "n_candidates": n_candidates, "n_objects": n_objects}
+    meta_path = root / "dataset_config.json"
+    if meta_path.exists() and json.loads(meta_path.read_text()) != meta:
+        raise ValueError(f"{root} holds a dataset of another configuration ({meta_path}); "
+                         "use a new folder")
+    meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+    log_path = root / "scenes.jsonl"
+    done = read_done(log_path)  # a line cut by a kill is dropped: that scene is redone
+    todo = [i for i in range(n_scenes) if i not in done]
+    if done:
+        log.info("resuming dataset: %d of %d scenes already written", n_scenes - len(todo),
+                    n_scenes)
     t0 = time.perf_counter()
-    ex = Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
-                  progress=progress)
-    tasks = [(specs, seed, i, n_candidates, n_objects) for i in range(n_scenes)]
-    samples, reasons = [], {}
-    for sample, rs in ex.imap(_scene_task, tasks, desc="scenes", star=True):
-        samples.append(sample)
-        for k, v in rs.items():
+    ex = executor or Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
+                              progress=progress)
+    tasks = [(specs, seed, i, n_candidates, n_objects) for i in todo]
+    with log_path.open("a") as fh:
+        for i, (sample, rs) in zip(todo, ex.imap(_scene_task, tasks, desc="scenes", star=True),
+                                   strict=True):
+            line = write_cornell_image(sample, root, i)
+            rec = {"index": i, "mapping": line, "positives": len(sample.positives),
+                   "negatives": len(sample.negatives), "outcomes": rs}
+            fh.write(json.dumps(rec) + "\n")
+            fh.flush()
+            done[i] = rec
+    records = [done[i] for i in sorted(done) if i < n_scenes]
+    write_cornell_mapping(root, [r["mapping"] for r in records if r["mapping"]])
+    reasons: dict[str, int] = {}
+    for r in records:
+        for k, v in r["outcomes"].items():
             reasons[k] = reasons.get(k, 0) + v
-    root = write_cornell(samples, out)
     seconds = time.perf_counter() - t0
     stats = {
-        "images": len(samples),
-        "objects": objects if isinstance(objects, str) else [s.name for s in specs],
-        "seed": seed,
-        "positives": int(sum(len(s.positives) for s in samples)),
-        "negatives": int(sum(len(s.negatives) for s in samples)),
+        "images": len(records),
+        **meta,
+        "positives": int(sum(r["positives"] for r in records)),
+        "negatives": int(sum(r["negatives"] for r in records)),
         "outcomes": reasons,
-        "seconds": round(seconds, 2),
-        "labelled_rectangles_per_second": round(n_scenes * n_candidates / seconds, 2),
+        "seconds_this_run": round(seconds, 2),
+        "labelled_rectangles_per_second": (round(len(todo) * n_candidates / seconds, 2)
+                                           if todo and seconds > 0 else None),
     }
-    (Path(root) / "labels.json").write_text(json.dumps(stats, indent=2) + "\n")
+    (root / "labels.json").write_text(json.dumps(stats, indent=2) + "\n")
     return stats
 
 

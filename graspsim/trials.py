@@ -194,7 +194,7 @@ def _trial_task(specs, detector, seed, index, config, params):
     return run_trial(_worker_sim(), specs, detector, seed, index, config, params)
 
 
-def _read_done(path: Path) -> dict[int, dict]:
+def read_done(path: Path) -> dict[int, dict]:
     """Complete records of a JSONL file; a torn last line is dropped and the file rewritten."""
     if not path.exists():
         return {}
@@ -268,7 +268,7 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
                 )
         cfg_path.write_text(json.dumps(meta, indent=2) + "\n")
         jsonl = out / "trials.jsonl"
-        done = _read_done(jsonl)
+        done = read_done(jsonl)
     todo = [i for i in range(n) if i not in done]
     if done:
         log.info("resuming: %d of %d trials already done", n - len(todo), n)

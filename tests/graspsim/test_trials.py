@@ -111,6 +111,28 @@ def test_dataset_in_cornell_layout_loads(tmp_path, easy_objects):
         assert np.all(s.depth[s.depth_valid] > 0) and np.all(s.depth[~s.depth_valid] == 0)
 
 
+def test_dataset_resumes_after_a_kill(tmp_path, easy_objects):
+    full = make_dataset(n_scenes=3, objects=easy_objects, out=tmp_path / "a", seed=2,
+                        n_candidates=6)
+    # Simulate a kill after the first scene: keep one finished line and a truncated one.
+    part = tmp_path / "b"
+    make_dataset(n_scenes=1, objects=easy_objects, out=part, seed=2, n_candidates=6)
+    with (part / "scenes.jsonl").open("a") as fh:
+        fh.write('{"index": 1, "mapp')
+    resumed = make_dataset(n_scenes=3, objects=easy_objects, out=part, seed=2, n_candidates=6)
+    lines = (part / "scenes.jsonl").read_text().splitlines()
+    assert sorted(json.loads(ln)["index"] for ln in lines if ln.endswith("}")) == [0, 1, 2]
+    assert resumed["positives"] == full["positives"]
+    assert resumed["negatives"] == full["negatives"]
+    a, b = load_cornell(tmp_path / "a"), load_cornell(part)
+    for sa, sb in zip(a, b, strict=True):
+        np.testing.assert_array_equal(sa.depth, sb.depth)
+        assert [r.as_array().tolist() for r in sa.positives] == \
+            [r.as_array().tolist() for r in sb.positives]
+    with pytest.raises(ValueError, match="another configuration"):
+        make_dataset(n_scenes=3, objects=easy_objects, out=part, seed=3, n_candidates=6)
+
+
 def test_patch_file_reads_back(tmp_path, easy_objects):
     out = tmp_path / "p.npz"
     info = make_patches(n=300, out=out, objects=easy_objects, seed=0, n_scenes=2,
