@@ -219,7 +219,8 @@ def read_done(path: Path) -> dict[int, dict]:
 
 def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, out=None,
                n_jobs: int = 1, config: TrialConfig = TrialConfig(),
-               params: ExecutionParams | None = None, progress: bool = False) -> dict:
+               params: ExecutionParams | None = None, progress: bool = False,
+               executor=None, detector_name: str | None = None) -> dict:
     """Run (or finish) ``n`` trials and write records and summaries to ``out``.
 
     Parameters
@@ -238,6 +239,10 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     config : TrialConfig
     params : ExecutionParams or None
     progress : bool
+    executor : graspsim.executor.Executor or None
+        Where trials run (local cores or a Ray cluster; ``n_jobs`` is then ignored).
+    detector_name : str or None
+        Name recorded for a detector object (default: its class name).
 
     Returns
     -------
@@ -246,7 +251,8 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     """
     from .executor import Executor
 
-    det_name = detector if isinstance(detector, str | Path) else type(detector).__name__
+    det_name = detector_name or (detector if isinstance(detector, str | Path)
+                                 else type(detector).__name__)
     det = load_detector(detector) if isinstance(detector, str | Path) else detector
     specs = resolve_objects(objects)
     if n < 0:
@@ -275,8 +281,8 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     t0 = time.perf_counter()
     new = 0
     if todo:
-        ex = Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
-                      progress=progress)
+        ex = executor or Executor(backend="loky" if n_jobs != 1 else "sequential",
+                                  n_jobs=n_jobs, progress=progress)
         tasks = [(specs, det, seed, i, config, params) for i in todo]
         fh = open(jsonl, "a") if jsonl is not None else None  # noqa: SIM115
         try:

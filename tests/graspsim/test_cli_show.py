@@ -1,4 +1,4 @@
-"""`graspsim show` and the interim `graspsim run` default job."""
+"""`graspsim show`: rectangle overlays of Cornell and Jacquard data."""
 
 from __future__ import annotations
 
@@ -8,14 +8,39 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import graspsim
-from dlsr.datasets import load_cornell, write_cornell
+from dlsr.datasets import GraspSample, load_cornell, write_cornell
+from dlsr.rectangles import GraspRectangle
 from dlsr.viz import show_dataset
 from graspsim.cli import main
-from graspsim.commands.run import builtin_samples, default_job, default_shared_data
 
-REPO = Path(__file__).resolve().parents[2]
 
+
+
+def builtin_samples() -> list[GraspSample]:
+    """Three synthetic 480x640 Cornell-like images: a box on a table with grasps across it."""
+    samples = []
+    rows, cols = np.mgrid[0:480, 0:640]
+    for i, angle in enumerate((0.0, 0.5, -1.0)):
+        c, s = np.cos(angle), np.sin(angle)
+        # Box frame: long axis at `angle` (counter-clockwise as displayed), 200 x 60 px.
+        dx, dy = cols - 320.0, rows - 240.0
+        along = dx * c - dy * s
+        across = dx * s + dy * c
+        box = (np.abs(along) < 100) & (np.abs(across) < 30)
+        rgb = np.full((480, 640, 3), 200, dtype=np.uint8)
+        rgb[box] = (40, 120, 200)
+        depth = np.where(box, 0.62, 0.70).astype(np.float32)
+        valid = np.ones_like(box)
+        valid[:8] = False  # a band without depth, as real sensors have
+        depth[~valid] = 0
+        # Grasps close across the box (closing direction perpendicular to its long axis).
+        pos = [
+            GraspRectangle(320 + t * c, 240 - t * s, angle + np.pi / 2, 90, 30)
+            for t in (-60.0, 0.0, 60.0)
+        ]
+        neg = [GraspRectangle(320, 240, angle, 90, 30)]  # along the box: too long to close
+        samples.append(GraspSample(f"{100 + i:04d}", "box", rgb, depth, valid, pos, neg))
+    return samples
 
 @pytest.fixture
 def cornell_root(tmp_path):
@@ -69,19 +94,3 @@ def test_builtin_fixture_round_trips(tmp_path):
     for a, b in zip(samples, back, strict=True):
         np.testing.assert_array_equal(a.depth, b.depth)
         assert len(b.positives) == 3 and len(b.negatives) == 1
-
-
-def test_default_job_falls_back_to_builtin_fixture(tmp_path):
-    paths = default_job("t", data=tmp_path / "no_data", runs_dir=tmp_path / "runs")
-    assert [p.relative_to(tmp_path / "runs" / "t").as_posix() for p in paths] == [
-        "fixture/0100.png", "fixture/0101.png", "fixture/0102.png"
-    ]
-
-
-def test_default_job_on_real_data(shared_data, tmp_path):
-    if Path(graspsim.__file__).resolve().parents[1] == REPO:  # editable install (make run)
-        assert default_shared_data() == shared_data.resolve()
-    paths = default_job("real", data=shared_data, runs_dir=tmp_path)
-    names = {p.parent.name for p in paths}
-    assert names == {"jacquard", "cornell"}
-    assert len([p for p in paths if p.parent.name == "jacquard"]) == 28

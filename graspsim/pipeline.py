@@ -1,0 +1,334 @@
+"""The default end-to-end job behind ``graspsim run`` (and ``make run``).
+
+With no argument and no download it:
+
+1. generates a synthetic, physics-labelled Cornell dataset from the built-in **train** objects;
+2. evaluates DLSR recognition by nested cross-validation (object-wise) on it;
+3. evaluates DLSR detection by cross-validation (object-wise, rectangle metric) on it;
+4. trains the DLSR detector on the whole dataset;
+5. runs simulated grasp trials on the held-out **test** objects with the DLSR detector and the
+   baselines (mask-pca, random, and the physics oracle);
+6. writes ``report.md`` and a self-contained ``report.html``.
+
+Every stage writes its results as it goes and records completion in ``stages.json``, so
+``graspsim run --resume DIR`` (or rerunning with the same ``--out``) continues an interrupted run
+without redoing finished work. Every run records its configuration, seeds and package versions
+in ``run.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import platform
+import time
+from dataclasses import asdict, dataclass, field
+from importlib import metadata
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+__all__ = ["RunConfig", "load_config", "run_job", "resume_job", "QUICK"]
+
+
+@dataclass
+class RunConfig:
+    """Everything a run depends on (all of it is recorded in ``run.json``).
+
+    Attributes
+    ----------
+    name : str
+        Folder name under ``runs/`` when no output folder is given.
+    seed : int
+        Root seed; every stage derives its own from it.
+    scenes : int
+        Synthetic Cornell images generated from the train objects.
+    candidates : int
+        Rectangles labelled by physics per scene.
+    learner, encoder : str
+        The DLSR combination (default NKM-Natural: the paper's best image-wise detector, and
+        the cheapest to encode: k-means triangle activations are one matrix product).
+    n_atoms, n_patches : int
+        Dictionary size and the number of random patches it is learned from.
+    folds, inner_folds : int
+        Cross-validation folds (object-wise) for recognition and detection.
+    C : float
+        SVM cost used for detection and the final model.
+    detector : {"dense", "exact"}
+    trials : int
+        Simulated grasp trials per detector on the test objects.
+    trial_candidates : int
+        Rectangles labelled per trial scene (for the oracle and the rectangle-metric verdict).
+    baselines : list of str
+        Detectors run beside DLSR in the trials.
+    backend, address, jobs :
+        Executor for the parallel stages (see :class:`graspsim.executor.Executor`).
+    """
+
+    name: str = "default"
+    seed: int = 0
+    scenes: int = 60
+    candidates: int = 48
+    learner: str = "NKM"
+    encoder: str = "Natural"
+    n_atoms: int = 200
+    n_patches: int = 50_000
+    folds: int = 5
+    inner_folds: int = 3
+    C: float = 1.0
+    detector: str = "dense"
+    trials: int = 100
+    trial_candidates: int = 32
+    baselines: list[str] = field(default_factory=lambda: ["mask-pca", "random", "oracle"])
+    backend: str = "loky"
+    address: str | None = None
+    jobs: int = 2
+
+    def validated(self) -> RunConfig:
+        from dlsr.features import ENCODERS, LEARNERS
+
+        if self.learner not in LEARNERS:
+            raise ValueError(f"learner must be one of {LEARNERS}, got {self.learner!r}")
+        if self.encoder not in ENCODERS:
+            raise ValueError(f"encoder must be one of {ENCODERS}, got {self.encoder!r}")
+        if self.detector not in ("dense", "exact"):
+            raise ValueError(f"detector must be 'dense' or 'exact', got {self.detector!r}")
+        for name in ("scenes", "candidates", "n_atoms", "n_patches", "folds", "trials"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.scenes < self.folds:
+            raise ValueError(f"{self.folds} folds need at least {self.folds} scenes")
+        return self
+
+
+# The 2-minute version (``--quick``).
+QUICK = {
+    "name": "quick", "scenes": 16, "candidates": 32, "n_atoms": 50, "n_patches": 10_000,
+    "folds": 3, "inner_folds": 2, "trials": 16, "trial_candidates": 16,
+}
+
+
+def load_config(path=None, quick: bool = False, **overrides) -> RunConfig:
+    """A :class:`RunConfig` from defaults, ``--quick``, a TOML or YAML file, then overrides."""
+    values: dict = {}
+    if quick:
+        values.update(QUICK)
+    if path is not None:
+        path = Path(path)
+        if not path.exists():
+            raise FileNotFoundError(f"config file not found: {path}")
+        text = path.read_text()
+        if path.suffix.lower() == ".toml":
+            try:
+                import tomllib
+            except ModuleNotFoundError:  # Python 3.10
+                import tomli as tomllib
+            data = tomllib.loads(text)
+        elif path.suffix.lower() in (".yaml", ".yml"):
+            try:
+                import yaml
+            except ModuleNotFoundError as exc:
+                raise ValueError(f"{path}: YAML configs need PyYAML (pip install pyyaml); "
+                                 "TOML works out of the box") from exc
+            data = yaml.safe_load(text) or {}
+        else:
+            raise ValueError(f"{path}: config must be .toml, .yaml or .yml")
+        if not isinstance(data, dict):
+            raise ValueError(f"{path}: expected a table of settings")
+        data = data.get("run", data)
+        known = {f.name for f in dataclasses.fields(RunConfig)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"{path}: unknown settings {unknown}; known: {sorted(known)}")
+        values.update(data)
+    values.update({k: v for k, v in overrides.items() if v is not None})
+    return RunConfig(**values).validated()
+
+
+def _versions() -> dict:
+    out = {"python": platform.python_version()}
+    for pkg in ("dlsr-graspsim", "numpy", "scipy", "scikit-learn", "opencv-python-headless",
+                "pybullet", "gymnasium", "trimesh", "shapely", "joblib", "matplotlib", "ray"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+class _Stages:
+    """``stages.json``: which stages finished, with their results."""
+
+    def __init__(self, root: Path):
+        self.path = root / "stages.json"
+        self.data = json.loads(self.path.read_text()) if self.path.exists() else {}
+
+    def done(self, name):
+        return name in self.data
+
+    def get(self, name):
+        return self.data[name]
+
+    def finish(self, name, result):
+        self.data[name] = result
+        tmp = self.path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(self.data, indent=2, default=str))
+        tmp.replace(self.path)
+
+
+def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
+            progress: bool = True) -> Path:
+    """Run (or continue) the end-to-end job and return the report's path.
+
+    Parameters
+    ----------
+    config : RunConfig or None
+        Defaults when None.
+    out : str or Path or None
+        Run folder (default ``runs/<config.name>``). An existing folder is continued when its
+        ``run.json`` holds the same configuration; another configuration is an error.
+    resume : bool
+        False refuses to reuse a folder that already holds a run.
+    progress : bool
+        Progress bars on every long step.
+    """
+    from .executor import Executor, task_seeds
+
+    config = (config or RunConfig()).validated()
+    root = Path(out) if out is not None else Path("runs") / config.name
+    root.mkdir(parents=True, exist_ok=True)
+    run_json = root / "run.json"
+    cfg = asdict(config)
+    if run_json.exists():
+        old = json.loads(run_json.read_text())
+        if not resume:
+            raise ValueError(f"{root} already holds a run: use --resume {root} or a new --out")
+        if old.get("config") != json.loads(json.dumps(cfg)):
+            raise ValueError(f"{root} holds a run of another configuration ({run_json}); "
+                             "use a new --out")
+        log.info("continuing the run in %s", root)
+    else:
+        run_json.write_text(json.dumps({
+            "config": cfg, "versions": _versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "machine": {"platform": platform.platform(), "cpus": _cpus()},
+        }, indent=2))
+    seeds = dict(zip(("dataset", "recognition", "detection", "model", "trials"),
+                     task_seeds(config.seed, 5), strict=True))
+    ex = Executor(backend=config.backend, n_jobs=config.jobs, address=config.address,
+                  progress=progress)
+    stages = _Stages(root)
+    t_start = time.perf_counter()
+
+    # 1. Synthetic Cornell dataset from the train objects.
+    if not stages.done("dataset"):
+        from .datagen import make_dataset
+
+        t0 = time.perf_counter()
+        stats = make_dataset(n_scenes=config.scenes, objects="train", out=root / "dataset",
+                             seed=seeds["dataset"], n_candidates=config.candidates,
+                             executor=ex)
+        stats["seconds"] = time.perf_counter() - t0
+        stages.finish("dataset", stats)
+    from dlsr.datasets import load_cornell
+
+    samples = load_cornell(root / "dataset")
+
+    # 2. Recognition by nested cross-validation (object-wise).
+    if not stages.done("recognition"):
+        from dlsr import recognition as rec
+
+        t0 = time.perf_counter()
+        data = rec.recognition_data(samples, random_state=seeds["recognition"])
+        summary = rec.run_recognition_benchmark(
+            data, root / "recognition", learners=[config.learner], encoders=[config.encoder],
+            split="object", n_folds=config.folds, inner_folds=config.inner_folds,
+            n_atoms=config.n_atoms, n_patches=config.n_patches,
+            random_state=seeds["recognition"], n_jobs=config.jobs, progress=progress,
+        )
+        cell = summary["cells"][0]
+        stages.finish("recognition", {
+            "accuracy": cell["accuracy"], "std": cell["std"],
+            "n_rectangles": len(data), "n_positive": int(data.labels.sum()),
+            "seconds": time.perf_counter() - t0,
+        })
+
+    # 3. Detection by cross-validation (object-wise, rectangle metric).
+    if not stages.done("detection"):
+        from .benchmarks import detection_benchmark
+
+        t0 = time.perf_counter()
+        det = detection_benchmark(
+            root / "dataset", format="cornell", out=root / "detection", split="object",
+            learner=config.learner, encoder=config.encoder, C=config.C,
+            detector=config.detector, n_folds=config.folds, n_atoms=config.n_atoms,
+            n_patches=config.n_patches, seed=seeds["detection"], progress=progress,
+        )
+        stages.finish("detection", {
+            k: det.get(k) for k in ("accuracy", "baselines", "seconds_per_image")
+        } | {"seconds": time.perf_counter() - t0})
+
+    # 4. The final detector, trained on every synthetic image.
+    model_path = root / "model" / "dlsr"
+    if not stages.done("model"):
+        from dlsr.detection import train_detector
+
+        t0 = time.perf_counter()
+        model = train_detector(samples, learner=config.learner, encoder=config.encoder,
+                               C=config.C, n_atoms=config.n_atoms, n_patches=config.n_patches,
+                               random_state=seeds["model"], detector=config.detector)
+        model_path.parent.mkdir(parents=True, exist_ok=True)
+        paths = model.save(model_path)
+        stages.finish("model", {"paths": [str(p) for p in paths],
+                                "seconds": time.perf_counter() - t0})
+
+    # 5. Simulated grasp trials on the held-out test objects.
+    from .trials import TrialConfig, run_trials
+
+    trial_cfg = TrialConfig(n_candidates=config.trial_candidates)
+    detectors = ["dlsr", *config.baselines]
+    for name in detectors:
+        key = f"trials/{name}"
+        if stages.done(key):
+            continue
+        t0 = time.perf_counter()
+        det = _trial_detector(name, model_path)
+        s = run_trials(det, objects="test", n=config.trials, seed=seeds["trials"],
+                       out=root / "trials" / name, config=trial_cfg, executor=ex,
+                       progress=progress, detector_name=name)
+        s.pop("records", None)
+        s["seconds"] = time.perf_counter() - t0
+        stages.finish(key, s)
+
+    # 6. The report.
+    from .report import write_report
+
+    report = write_report(root, config, stages.data, wall=time.perf_counter() - t_start)
+    log.info("report: %s", report)
+    return report
+
+
+def _cpus() -> int:
+    import os
+
+    return os.cpu_count() or 1
+
+
+def _trial_detector(name: str, model_path: Path):
+    if name == "dlsr":
+        from dlsr.detection import DLSRDetector
+
+        return DLSRDetector.load(model_path).detector()
+    from .detectors import load_detector
+
+    return load_detector(name)
+
+
+def resume_job(folder, progress: bool = True) -> Path:
+    """Continue the run in ``folder`` with the configuration recorded in its ``run.json``."""
+    folder = Path(folder)
+    run_json = folder / "run.json"
+    if not run_json.exists():
+        raise FileNotFoundError(f"no run to resume: {run_json} is missing")
+    config = RunConfig(**json.loads(run_json.read_text())["config"]).validated()
+    return run_job(config, out=folder, resume=True, progress=progress)
