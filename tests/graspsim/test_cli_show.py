@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from PIL import Image
@@ -12,8 +10,6 @@ from dlsr.datasets import GraspSample, load_cornell, write_cornell
 from dlsr.rectangles import GraspRectangle
 from dlsr.viz import show_dataset
 from graspsim.cli import main
-
-
 
 
 def builtin_samples() -> list[GraspSample]:
