@@ -64,8 +64,7 @@ import logging
 import cv2
 import numpy as np
 from scipy import ndimage
-from scipy.interpolate import LinearNDInterpolator
-from scipy.spatial import QhullError
+from scipy.spatial import Delaunay, QhullError
 
 from .datasets import GraspSample
 from .rectangles import GraspRectangle, as_rect_array, normalize_angle
@@ -235,6 +234,25 @@ def surface_normals(z) -> np.ndarray:
     return np.stack([-gx * inv, -gy * inv, inv], axis=-1).astype(np.float32)
 
 
+def _linear_interpolate(points, values, query) -> np.ndarray:
+    """Piecewise-linear interpolation on the Delaunay triangulation of ``points``.
+
+    The same values as ``scipy.interpolate.LinearNDInterpolator(points, values)(query)`` (NaN
+    outside the hull), computed from the triangulation's barycentric transforms directly:
+    on the degenerate (co-circular) triangulations of pixel grids, the interpolator's own call
+    took up to 0.7 s for 50 query points here, against about 0.2 ms for this.
+    """
+    tri = Delaunay(points)
+    simplex = tri.find_simplex(query)
+    out = np.full(len(query), np.nan)
+    inside = simplex >= 0
+    T = tri.transform[simplex[inside]]
+    b = np.einsum("nij,nj->ni", T[:, :2], query[inside] - T[:, 2])
+    weights = np.column_stack([b, 1.0 - b.sum(axis=1)])
+    out[inside] = np.einsum("nk,nk->n", values[tri.simplices[simplex[inside]]], weights)
+    return out
+
+
 def fill_depth_holes(z, valid, method: str = "band", band: int = 1) -> np.ndarray:
     """Fill invalid pixels of a depth map: linear scattered interpolation, then nearest.
 
@@ -279,9 +297,9 @@ def fill_depth_holes(z, valid, method: str = "band", band: int = 1) -> np.ndarra
         pts = np.argwhere(support)
         if len(pts) >= 3:
             try:
-                interp = LinearNDInterpolator(pts.astype(np.float64), z[support])
                 hp = np.argwhere(holes)
-                vals = interp(hp.astype(np.float64))
+                vals = _linear_interpolate(pts.astype(np.float64), z[support],
+                                           hp.astype(np.float64))
                 ok = np.isfinite(vals)
                 out[hp[ok, 0], hp[ok, 1]] = vals[ok]
                 holes = holes.copy()
