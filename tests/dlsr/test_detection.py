@@ -1,0 +1,329 @@
+"""Grasp detection: candidates, exact and dense scores, persistence, bad input."""
+
+from __future__ import annotations
+
+import logging
+
+import cv2
+import numpy as np
+import pytest
+
+from dlsr import patches, whitening
+from dlsr.detection import (
+    DenseDetector,
+    DLSRDetector,
+    ExactGridDetector,
+    SearchGrid,
+    enumerate_candidates,
+    object_region,
+    table_plane_mask,
+)
+from dlsr.features import Representation, rectangle_features
+from dlsr.metrics import rectangle_metric, rectangle_metric_many
+from dlsr.preprocess import rectangle_images
+from dlsr.rectangles import GraspRectangle, corners_from_array
+from dlsr.svm import FeatureStandardizer, SquaredHingeSVC
+
+H, W = 120, 160
+SMALL_GRID = SearchGrid(angles_deg=(0, 45, 90, 135), openings=(20, 30, 40), jaws=(10, 20),
+                        step=6.0, dilate=8)
+
+
+def _scene(seed=0, bar=True):
+    """A textured tilted table with a raised, red bar (long axis along x) in the middle."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:H, 0:W]
+    noise = cv2.GaussianBlur(rng.random((H, W, 3)).astype(np.float32), (0, 0), 2.0)
+    rgb = 90 + 120 * noise + 20 * np.sin(xx / 9.0)[..., None]
+    depth = (0.8 + 0.0004 * xx + 0.0002 * yy).astype(np.float32)
+    mask = np.zeros((H, W), bool)
+    if bar:
+        mask[52:68, 40:120] = True
+        depth[mask] -= 0.03
+        rgb[mask] = rgb[mask] * 0.3 + np.array([200.0, 30.0, 30.0]) * 0.7
+    return {"rgb": np.clip(rgb, 0, 255).astype(np.uint8), "depth": depth,
+            "depth_valid": np.ones((H, W), bool), "mask": mask}
+
+
+def _model(images, masks, labels, n_atoms=24, seed=0, C=1.0):
+    """A small NKM-Natural model: centroids are random whitened training patches."""
+    X, M = patches.extract_patches(images, masks, 6)
+    X, M = X.reshape(-1, 288), M.reshape(-1, 288)
+    Xs = whitening.standardize_patches(X, M)
+    mean, P = whitening.fit_zca(Xs, M)
+    Xw = whitening.apply_zca(Xs, M, mean, P)
+    rng = np.random.default_rng(seed)
+    full = np.flatnonzero(M.all(1))
+    cents = Xw[rng.choice(full, n_atoms, replace=False)].astype(np.float32)
+    D = cents / np.maximum(np.linalg.norm(cents, axis=1, keepdims=True), 1e-9)
+    rep = Representation("NKM", D, cents, mean, P, None)
+    F = rectangle_features(images, masks, rep, "Natural", None, polarity=False)
+    scaler = FeatureStandardizer().fit(F)
+    svm = SquaredHingeSVC(C=C).fit(scaler.transform(F), labels)
+    return DLSRDetector(rep, "Natural", None, False, scaler.mean_, scaler.scale_,
+                        np.asarray(svm.coef_[0]), float(svm.intercept_[0]))
+
+
+def _random_model(obs, seed=0):
+    rng = np.random.default_rng(seed)
+    R = np.column_stack([rng.uniform(40, 120, 60), rng.uniform(40, 80, 60),
+                         rng.uniform(-1.5, 1.5, 60), np.full(60, 30.0), np.full(60, 20.0)])
+    im, mk = rectangle_images(obs["rgb"], obs["depth"], obs["depth_valid"], R)
+    return _model(im, mk, (np.arange(60) % 2), seed=seed)
+
+
+def _bar_training(obs, rng):
+    """Positives across the bar; negatives: grid candidates that fail the rectangle metric."""
+    pos = []
+    for x in np.arange(50, 112, 4.0):
+        for w, h in ((30, 10), (30, 20), (40, 10), (40, 20)):
+            pos.append((x + rng.uniform(-1, 1), 60 + rng.uniform(-1, 1),
+                        np.pi / 2 + rng.uniform(-0.2, 0.2), w, h))
+    pos = np.array(pos)
+    cand = enumerate_candidates(obs["mask"], SMALL_GRID)
+    cand = cand[~rectangle_metric_many(cand, pos)]
+    neg = cand[rng.choice(len(cand), min(len(cand), 2 * len(pos)), replace=False)]
+    rects = np.concatenate([pos, neg])
+    labels = np.r_[np.ones(len(pos), int), np.zeros(len(neg), int)]
+    im, mk = rectangle_images(obs["rgb"], obs["depth"], obs["depth_valid"], rects)
+    return pos, im, mk, labels
+
+
+# ------------------------------------------------------------------------------------------
+# candidates and region
+
+
+def test_enumerate_candidates_respects_the_grid_coverage_and_image():
+    region = np.zeros((H, W), bool)
+    region[50:70, 60:100] = True
+    grid = SearchGrid(dilate=5)
+    cand = enumerate_candidates(region, grid)
+    assert len(cand) > 0
+    assert np.all(cand[:, 3] >= cand[:, 4])
+    assert set(np.round(np.degrees(cand[:, 2]) % 180).astype(int)) <= set(range(0, 180, 15))
+    assert set(cand[:, 3]) <= set(range(10, 100, 10))
+    assert np.all(cand[:, 0] % 10 == 0) and np.all(cand[:, 1] % 10 == 0)
+    corners = corners_from_array(cand)
+    assert corners[..., 0].min() >= 0 and corners[..., 0].max() <= W - 1
+    assert corners[..., 1].min() >= 0 and corners[..., 1].max() <= H - 1
+    # coverage: every candidate has >= 50 % of its area (sampled) on the dilated region
+    dil = cv2.dilate(region.astype(np.uint8), cv2.getStructuringElement(
+        cv2.MORPH_ELLIPSE, (11, 11))).astype(bool)
+    u = np.linspace(-0.45, 0.45, 10)
+    for x, y, t, w, h in cand[:: max(1, len(cand) // 200)]:
+        a, b = np.meshgrid(u * w, u * h)
+        px = x + a * np.cos(t) + b * np.sin(t)
+        py = y - a * np.sin(t) + b * np.cos(t)
+        frac = dil[np.clip(np.rint(py).astype(int), 0, H - 1),
+                   np.clip(np.rint(px).astype(int), 0, W - 1)].mean()
+        assert frac >= 0.35
+    # a big rectangle far from the region is never a candidate
+    assert not np.any(np.abs(cand[:, 1] - 60) > 60)
+
+
+def test_empty_region_gives_no_candidates():
+    assert enumerate_candidates(np.zeros((H, W), bool)).shape == (0, 5)
+
+
+def test_table_plane_mask_finds_the_raised_object():
+    obs = _scene()
+    found = table_plane_mask(obs["depth"], obs["depth_valid"])
+    inter = (found & obs["mask"]).sum()
+    assert inter / obs["mask"].sum() > 0.9
+    assert (found & ~obs["mask"]).sum() < 0.05 * obs["mask"].sum()
+    region, how = object_region({k: v for k, v in obs.items() if k != "mask"})
+    assert how == "depth" and (region & obs["mask"]).sum() > 0.9 * obs["mask"].sum()
+    region, how = object_region(obs)
+    assert how == "mask"
+
+
+def test_background_subtraction_region():
+    obs = _scene()
+    bg = _scene(bar=False)["rgb"]
+    region, how = object_region(obs, background=bg)
+    assert how == "background"
+    assert (region & obs["mask"]).sum() > 0.8 * obs["mask"].sum()
+
+
+# ------------------------------------------------------------------------------------------
+# scores
+
+
+def test_quadrant_weights_fold_the_standardisation_and_svm():
+    obs = _scene()
+    model = _random_model(obs)
+    R = np.array([[80.0, 60.0, 0.3, 40.0, 20.0], [70.0, 55.0, -1.0, 30.0, 30.0]])
+    im, mk = rectangle_images(obs["rgb"], obs["depth"], obs["depth_valid"], R)
+    F = model.features(im, mk).astype(np.float64)
+    V, const = model.quadrant_weights()
+    k = model.n_codes
+    folded = const + sum(F[:, q * k:(q + 1) * k] @ V[:, q] for q in range(4))
+    np.testing.assert_allclose(model.image_scores(im, mk), folded, rtol=1e-4, atol=1e-4)
+
+
+def test_dense_scores_equal_exact_scores_without_padding():
+    """Candidates on the canvas grid (90-degree angles, half-pixel centres, w = h = 24): the
+    dense score is the exact score up to float rounding."""
+    obs = _scene(bar=False)
+    model = _random_model(obs)
+    cand = np.array([(x, y, t, 24.0, 24.0) for t in (0.0, -np.pi / 2)
+                     for x in np.arange(20.5, 140, 13) for y in np.arange(20.5, 100, 11)])
+    exact = model.rectangle_scores(obs, cand)
+    dense = DenseDetector(model).score(obs, cand)
+    scale = np.abs(exact).mean() + 1.0
+    np.testing.assert_allclose(dense, exact, rtol=0, atol=1e-4 * scale)
+
+
+def test_dense_scores_track_exact_scores_in_general():
+    obs = _scene()
+    model = _random_model(obs)
+    rng = np.random.default_rng(1)
+    n = 120
+    cand = np.column_stack([rng.uniform(45, 115, n), rng.uniform(45, 75, n),
+                            rng.uniform(-np.pi / 2, np.pi / 2, n), rng.choice([20.0, 30.0], n),
+                            np.zeros(n)])
+    cand[:, 4] = cand[:, 3]
+    exact = model.rectangle_scores(obs, cand)
+    dense = DenseDetector(model).score(obs, cand)
+    assert np.corrcoef(exact, dense)[0, 1] > 0.9
+
+
+# ------------------------------------------------------------------------------------------
+# detectors
+
+
+@pytest.fixture(scope="module")
+def bar_model():
+    obs = _scene()
+    rng = np.random.default_rng(0)
+    pos, im, mk, labels = _bar_training(obs, rng)
+    return _model(im, mk, labels, n_atoms=32), pos
+
+
+def test_detectors_find_the_grasp_on_a_separable_fixture(bar_model):
+    model, pos = bar_model
+    obs = _scene(seed=3)  # same layout, new texture
+    truths = [GraspRectangle(x, 60.0, np.pi / 2, w, h) for x in range(50, 112, 6)
+              for w, h in ((30, 10), (40, 20))]
+    for det in (DenseDetector(model, grid=SMALL_GRID, rescore=50, top_k=3),
+                ExactGridDetector(model, grid=SMALL_GRID, top_k=3)):
+        d = det.detect(obs)
+        assert d.reason is None and len(d.rects) == 3
+        assert np.all(np.diff(d.scores) <= 1e-12)  # best first
+        rects = d.rectangles() if isinstance(det, ExactGridDetector) else det.predict(obs)
+        assert all(isinstance(r, GraspRectangle) for r in rects)
+        assert rectangle_metric(rects[0], truths), (type(det).__name__, rects[0])
+
+
+def test_coarse_to_fine_finds_the_grasp(bar_model):
+    model, _ = bar_model
+    obs = _scene(seed=4)
+    truths = [GraspRectangle(x, 60.0, np.pi / 2, 30, 15) for x in range(50, 112, 6)]
+    coarse = SearchGrid(angles_deg=(0, 90), openings=(20, 40), jaws=(10, 20), step=12.0,
+                        dilate=8)
+    det = DenseDetector(model, grid=SMALL_GRID, coarse_to_fine=True, coarse_grid=coarse,
+                        rescore=20)
+    rects = det.predict(obs)
+    assert rects and rectangle_metric(rects[0], truths)
+
+
+def test_save_load_round_trip_gives_identical_predictions(bar_model, tmp_path):
+    model, _ = bar_model
+    model.config.update(grid=SMALL_GRID.to_dict(), rescore=30, top_k=4)
+    paths = model.save(tmp_path / "model")
+    assert {p.suffix for p in paths} == {".npz", ".json"}
+    loaded = DLSRDetector.load(tmp_path / "model.json")
+    obs = _scene(seed=5)
+    a = model.detector("dense").detect(obs)
+    b = loaded.detector("dense").detect(obs)
+    np.testing.assert_array_equal(a.rects, b.rects)
+    np.testing.assert_array_equal(a.scores, b.scores)
+    assert len(loaded.predict(obs)) == 4
+    with np.load(tmp_path / "model.npz", allow_pickle=False) as z:  # no pickled objects
+        assert "coef" in z.files
+
+
+def test_load_reports_missing_and_foreign_files(tmp_path):
+    with pytest.raises(FileNotFoundError, match="model"):
+        DLSRDetector.load(tmp_path / "absent")
+    (tmp_path / "x.json").write_text('{"format": "other"}')
+    np.savez(tmp_path / "x.npz", a=np.zeros(1))
+    with pytest.raises(ValueError, match="not a DLSR detector"):
+        DLSRDetector.load(tmp_path / "x")
+
+
+@pytest.mark.parametrize("kind", ["dense", "exact"])
+def test_all_masked_depth_gives_an_empty_result_with_a_reason(bar_model, kind, caplog):
+    model, _ = bar_model
+    obs = _scene()
+    obs["depth_valid"] = np.zeros((H, W), bool)
+    with caplog.at_level(logging.WARNING, logger="dlsr.detection"):
+        d = model.detector(kind, grid=SMALL_GRID).detect(obs)
+    assert len(d.rects) == 0 and "no valid pixel" in d.reason
+    assert "no valid pixel" in caplog.text
+
+
+@pytest.mark.parametrize("kind", ["dense", "exact"])
+def test_empty_object_region_gives_an_empty_result_with_a_reason(bar_model, kind, caplog):
+    model, _ = bar_model
+    obs = _scene()
+    obs["mask"] = np.zeros((H, W), bool)
+    with caplog.at_level(logging.WARNING, logger="dlsr.detection"):
+        rects = model.detector(kind, grid=SMALL_GRID).predict(obs)
+    assert rects == [] and "empty object region" in caplog.text
+
+
+def test_bad_observation_raises_a_clear_error(bar_model):
+    model, _ = bar_model
+    with pytest.raises(ValueError, match="do not match"):
+        model.detector("dense").predict({"rgb": np.zeros((10, 10, 3), np.uint8),
+                                         "depth": np.ones((8, 8), np.float32)})
+
+
+def test_dense_patch_scores_match_the_reference_pipeline_with_masked_entries():
+    """Box-filter standardisation + fused whitening/encoding = the reference functions, also
+    for patches with masked entries (depth holes, image border)."""
+    from dlsr.features import encode_patches
+
+    obs = _scene()
+    model = _random_model(obs)
+    rng = np.random.default_rng(2)
+    img = rng.normal(size=(30, 40, 8)).astype(np.float32)
+    msk = np.ones(img.shape, bool)
+    msk[5:12, 8:15, 4:] = False  # a depth hole
+    msk[:, :3, :] = False  # outside the image
+    msk[20, 30, 4:] = False
+    img *= msk
+    V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
+    stats = {"n_encodings": 0, "encode_seconds": 0.0, "encode_flops": 0.0}
+    S = DenseDetector(model, chunk_size=100)._score_maps(img, msk, V, stats)
+    X, M = patches.extract_patches(img[None], msk[None], 6)
+    X, M = X[0], M[0]
+    rep = model.representation
+    Xw = whitening.apply_zca(whitening.standardize_patches(X, M), M, rep.zca_mean,
+                             rep.zca_matrix)
+    ref = encode_patches(Xw, M, rep, "Natural", None, polarity=False) @ V
+    np.testing.assert_allclose(S.reshape(-1, 4), ref, rtol=1e-3, atol=1e-3 * np.abs(ref).max())
+    assert stats["n_encodings"] == 25 * 35
+
+
+def test_train_detector_from_samples_gives_a_working_model(tmp_path):
+    from dlsr.datasets import GraspSample
+    from dlsr.detection import train_detector
+
+    samples = []
+    for seed in range(3):
+        obs = _scene(seed=seed)
+        pos = [GraspRectangle(x, 60.0, np.pi / 2, 30.0, 15.0) for x in range(50, 112, 10)]
+        neg = [GraspRectangle(x, 60.0, 0.0, 30.0, 15.0) for x in range(50, 112, 10)]
+        neg += [GraspRectangle(x, 25.0, 0.5, 30.0, 15.0) for x in range(40, 120, 20)]
+        samples.append(GraspSample(str(seed), "bar", obs["rgb"], obs["depth"],
+                                   obs["depth_valid"], pos, neg, mask=obs["mask"]))
+    model = train_detector(samples, "NKM", "Natural", n_atoms=16, n_patches=3000,
+                           random_state=0, grid=SMALL_GRID, rescore=20)
+    assert model.config["n_train_rectangles"] == 3 * 18 and model.config["grid"]["step"] == 6.0
+    assert model.representation.centroids is not None
+    rects = model.predict(_scene(seed=7))
+    assert rects and isinstance(rects[0], GraspRectangle)
+    model.save(tmp_path / "m")
+    assert DLSRDetector.load(tmp_path / "m").predict(_scene(seed=7)) == rects

@@ -1,0 +1,188 @@
+"""Recognition: features, the Pipeline, nested cross-validation, resume and bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from sklearn.model_selection import GroupKFold, cross_val_score
+
+from dlsr import recognition as rec
+from dlsr.features import (
+    DLSRFeatures,
+    fit_representation,
+    pack_images,
+    rectangle_features,
+)
+
+SMALL = {"n_atoms": 12, "n_patches": 3000}
+
+
+def _bar_images(n, vertical, rng):
+    """24x24x8 rectangle images with a bright bar across (vertical) or along the crop."""
+    img = rng.normal(0, 0.05, size=(n, 24, 24, 8)).astype(np.float32)
+    pos = rng.integers(8, 16, size=n)
+    for i, p in enumerate(pos):
+        if vertical:
+            img[i, :, p - 2:p + 2, :] += 1.0
+        else:
+            img[i, p - 2:p + 2, :, :] += 1.0
+    masks = np.ones_like(img, dtype=bool)
+    masks[:, :3] = False  # padding rows, as a rectangle with jaw < opening has
+    img[~masks] = 0
+    return img, masks
+
+
+@pytest.fixture(scope="module")
+def separable():
+    rng = np.random.default_rng(0)
+    a, ma = _bar_images(60, True, rng)
+    b, mb = _bar_images(60, False, rng)
+    images = np.concatenate([a, b])
+    masks = np.concatenate([ma, mb])
+    labels = np.r_[np.ones(60, int), np.zeros(60, int)]
+    # 12 images, each with 5 positives and 5 negatives; 6 objects of 2 images each.
+    image_ids = np.array([f"img{i % 12}" for i in range(120)], dtype=object)
+    object_ids = np.array([f"obj{(i % 12) // 2}" for i in range(120)], dtype=object)
+    return rec.RecognitionData(images, masks, labels, image_ids, object_ids)
+
+
+@pytest.mark.parametrize(("learner", "encoder", "per_atom"), [
+    ("NKM", "Natural", 4),   # triangle codes, no polarity split: 4 quadrants x d
+    ("NKM", "SC", 8),        # polarity split doubles: 4 x 2d
+    ("RP", "ST", 8),
+    ("GSVQ", "Natural", 8),
+    ("R", "mOMP", 8),
+])
+def test_feature_dimensions(separable, learner, encoder, per_atom):
+    rep = fit_representation(separable.images, separable.masks, learner, random_state=0,
+                             **SMALL)
+    assert rep.dictionary.shape == (SMALL["n_atoms"], 288)
+    param = {"ST": 0.5, "mOMP": 2, "SC": 0.5}.get(encoder)
+    polarity = not (learner == "NKM" and encoder == "Natural")
+    F = rectangle_features(separable.images[:7], separable.masks[:7], rep, encoder, param,
+                           polarity=polarity, chunk_size=3)
+    assert F.shape == (7, per_atom * SMALL["n_atoms"])
+    assert F.dtype == np.float32 and np.all(np.isfinite(F))
+
+
+def test_paper_dimensions_for_300_atoms(separable):
+    rep = fit_representation(separable.images, separable.masks, "RP", n_atoms=300,
+                             n_patches=3000, random_state=0)
+    F = rectangle_features(separable.images[:2], separable.masks[:2], rep, "ST", 1.0)
+    assert F.shape == (2, 2400)
+
+
+def test_chunking_does_not_change_features(separable):
+    rep = fit_representation(separable.images, separable.masks, "NKM", random_state=1, **SMALL)
+    a = rectangle_features(separable.images[:10], separable.masks[:10], rep, "Natural",
+                           polarity=False, chunk_size=3)
+    b = rectangle_features(separable.images[:10], separable.masks[:10], rep, "Natural",
+                           polarity=False, chunk_size=64)
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5)
+
+
+def test_pipeline_beats_chance_with_group_cv(separable):
+    X = pack_images(separable.images, separable.masks)
+    model = rec.make_recognition_model("NKM", "Natural", C=1.0, random_state=0, **SMALL)
+    scores = cross_val_score(model, X, separable.labels, groups=separable.groups("object"),
+                             cv=GroupKFold(3))
+    assert scores.mean() > 0.9
+
+
+def test_nested_cv_beats_chance_and_keeps_folds_clean(separable):
+    out = rec.nested_cv_cell(separable, "NKM", "Natural", split="object", n_folds=3,
+                             inner_folds=2, random_state=0, **SMALL)
+    assert out["accuracy"] > 0.9
+    assert len(out["folds"]) == 3
+    assert sum(f["n_test"] for f in out["folds"]) == len(separable)
+    for f in out["folds"]:
+        assert f["C"] in rec.C_GRID
+
+
+def test_outer_folds_never_share_a_group(separable):
+    for split in ("image", "object"):
+        groups = separable.groups(split)
+        folds = rec.outer_folds(groups, 3, separable.labels)
+        seen = np.zeros(len(groups), int)
+        for tr, te in folds:
+            assert not set(groups[tr]) & set(groups[te])
+            seen[te] += 1
+        assert np.all(seen == 1)
+
+
+def test_fast_path_equals_refitting_the_pipeline(separable):
+    """The factored nested CV predicts what the Pipeline predicts with the chosen parameters."""
+    out = rec.nested_cv_cell(separable, "RP", "ST", split="image", n_folds=3, inner_folds=2,
+                             random_state=3, **SMALL)
+    folds = rec.outer_folds(separable.groups("image"), 3, separable.labels)
+    seeds = np.random.SeedSequence(3).generate_state(3)
+    X = pack_images(separable.images, separable.masks)
+    for k, ((tr, te), f) in enumerate(zip(folds, out["folds"], strict=True)):
+        model = rec.make_recognition_model("RP", "ST", encoder_param=f["encoder_param"],
+                                           C=f["C"], random_state=int(seeds[k]), **SMALL)
+        # fit_representation draws its patch and dictionary seeds from random_state.
+        model.fit(X[tr], separable.labels[tr])
+        pred = model.predict(X[te])
+        assert np.mean(pred == np.asarray(f["predictions"])) >= 0.97
+
+
+def test_features_transformer_validates(separable):
+    X = pack_images(separable.images[:20], separable.masks[:20])
+    with pytest.raises(ValueError, match="unknown encoder"):
+        DLSRFeatures(encoder="XYZ", **SMALL).fit(X)
+    with pytest.raises(ValueError, match="packed rectangle images"):
+        DLSRFeatures(**SMALL).fit(np.zeros((4, 10)))
+
+
+def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch):
+    kw = dict(learners=["NKM", "RP"], encoders=["Natural"], split="image", n_folds=3,
+              inner_folds=2, random_state=0, progress=False, **SMALL)
+    first = rec.run_recognition_benchmark(separable, tmp_path, **kw)
+    lines = (tmp_path / "results.jsonl").read_text().splitlines()
+    assert len(lines) == 2
+    assert {(c["learner"], c["encoder"]) for c in first["cells"]} == {
+        ("NKM", "Natural"), ("RP", "Natural")}
+    table = (tmp_path / "table1.md").read_text()
+    assert "| NKM |" in table and "| RP |" in table
+    # Drop the second cell, as if the run had been killed; the rerun computes only that one.
+    (tmp_path / "results.jsonl").write_text(lines[0] + "\n")
+    calls = []
+    real = rec.nested_cv_cell
+
+    def counting(*a, **k):
+        calls.append((a[1], a[2]))
+        return real(*a, **k)
+
+    monkeypatch.setattr(rec, "nested_cv_cell", counting)
+    again = rec.run_recognition_benchmark(separable, tmp_path, **kw)
+    assert calls == [("RP", "Natural")]
+    assert [c["accuracy"] for c in again["cells"]] == [c["accuracy"] for c in first["cells"]]
+    saved = json.loads((tmp_path / "recognition.json").read_text())
+    assert len(saved["cells"]) == 2
+    # Another configuration in the same folder does not reuse those cells.
+    calls.clear()
+    rec.run_recognition_benchmark(separable, tmp_path, **{**kw, "learners": ["NKM"],
+                                                          "n_folds": 2})
+    assert calls == [("NKM", "Natural")]
+
+
+def test_bad_input_is_a_clear_error(separable):
+    one_class = rec.RecognitionData(separable.images[:60], separable.masks[:60],
+                                    separable.labels[:60], separable.image_ids[:60],
+                                    separable.object_ids[:60])
+    with pytest.raises(ValueError, match="only class"):
+        rec.run_recognition_benchmark(one_class, "unused", learners=["NKM"],
+                                      encoders=["Natural"], progress=False)
+    with pytest.raises(ValueError, match="at least 50 groups"):
+        rec.nested_cv_cell(separable, "NKM", "Natural", n_folds=50, **SMALL)
+    with pytest.raises(ValueError, match="unknown learner"):
+        rec.nested_cv_cell(separable, "KSVD", "Natural")
+    no_objects = rec.RecognitionData(separable.images, separable.masks, separable.labels,
+                                     separable.image_ids,
+                                     np.array([None] * len(separable), dtype=object))
+    with pytest.raises(ValueError, match="object id"):
+        no_objects.groups("object")
+    with pytest.raises(ValueError, match="no labelled rectangles"):
+        rec.recognition_data([])
