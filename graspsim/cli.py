@@ -16,6 +16,11 @@ import sys
 COMMANDS = [
     "run",
     "show",
+    "detect",
+    "benchmark",
+    "trials",
+    "dataset",
+    "patches",
 ]
 
 

@@ -56,6 +56,12 @@ class RunConfig:
     C : float
         SVM cost used for detection and the final model.
     detector : {"dense", "exact"}
+    coarse_to_fine : bool
+        Dense detector: coarse scales and angles first, then the full grid around the best few.
+    rescore : int
+        Dense detector: the best candidates rescored exactly.
+    detection_images : int or None
+        At most this many test images per detection fold (None: all).
     trials : int
         Simulated grasp trials per detector on the test objects.
     trial_candidates : int
@@ -78,6 +84,9 @@ class RunConfig:
     inner_folds: int = 3
     C: float = 1.0
     detector: str = "dense"
+    coarse_to_fine: bool = True
+    rescore: int = 50
+    detection_images: int | None = None
     trials: int = 100
     trial_candidates: int = 32
     baselines: list[str] = field(default_factory=lambda: ["mask-pca", "random", "oracle"])
@@ -263,6 +272,8 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
             learner=config.learner, encoder=config.encoder, C=config.C,
             detector=config.detector, n_folds=config.folds, n_atoms=config.n_atoms,
             n_patches=config.n_patches, seed=seeds["detection"], progress=progress,
+            coarse_to_fine=config.coarse_to_fine, rescore=config.rescore,
+            max_images=config.detection_images,
         )
         stages.finish("detection", {
             k: det.get(k) for k in ("accuracy", "baselines", "seconds_per_image")
@@ -292,7 +303,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         if stages.done(key):
             continue
         t0 = time.perf_counter()
-        det = _trial_detector(name, model_path)
+        det = _trial_detector(name, model_path, config)
         s = run_trials(det, objects="test", n=config.trials, seed=seeds["trials"],
                        out=root / "trials" / name, config=trial_cfg, executor=ex,
                        progress=progress, detector_name=name)
@@ -314,11 +325,14 @@ def _cpus() -> int:
     return os.cpu_count() or 1
 
 
-def _trial_detector(name: str, model_path: Path):
+def _trial_detector(name: str, model_path: Path, config: RunConfig):
     if name == "dlsr":
         from dlsr.detection import DLSRDetector
 
-        return DLSRDetector.load(model_path).detector()
+        options = {}
+        if config.detector == "dense":
+            options = {"coarse_to_fine": config.coarse_to_fine, "rescore": config.rescore}
+        return DLSRDetector.load(model_path).detector(config.detector, **options)
     from .detectors import load_detector
 
     return load_detector(name)

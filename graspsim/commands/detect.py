@@ -1,0 +1,47 @@
+"""``graspsim detect``: the best grasp rectangles of one RGB-D image with a trained model."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "detect", help="detect grasps in one RGB-D image with a trained DLSR model"
+    )
+    p.add_argument("--model", required=True,
+                   help="saved model (PATH.npz + PATH.json, e.g. from benchmark --save-model)")
+    p.add_argument("--rgb", required=True, help="colour image")
+    p.add_argument("--depth", required=True,
+                   help="depth image: float TIFF in metres (or .npy); <= 0 means missing")
+    p.add_argument("--depth-units", type=float, default=1.0,
+                   help="multiplies the depth values to give metres (0.001 for millimetres)")
+    p.add_argument("--mask", default=None, help="object mask image (non-zero = object)")
+    p.add_argument("--background", default=None,
+                   help="background image: object region by background subtraction")
+    p.add_argument("--detector", choices=["dense", "exact"], default=None,
+                   help="default: the model's saved choice (dense)")
+    p.add_argument("--coarse-to-fine", action="store_true")
+    p.add_argument("--top-k", type=int, default=5)
+    p.add_argument("--out", default=None, help="overlay PNG (best in red/blue, others in "
+                   "yellow/grey)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from dlsr.detection import detect_files
+
+    options = {"coarse_to_fine": True} if args.coarse_to_fine else {}
+    det = detect_files(args.model, args.rgb, args.depth, mask=args.mask,
+                       background=args.background, depth_units=args.depth_units,
+                       detector=args.detector, top_k=args.top_k, out=args.out, **options)
+    print(json.dumps({
+        "rectangles": [dict(zip(("x", "y", "theta", "w", "h"), map(float, r), strict=True))
+                       for r in det.rects],
+        "scores": [float(s) for s in det.scores],
+        "n_candidates": det.n_candidates,
+        "seconds": round(det.seconds, 3),
+        "reason": det.reason,
+    }, indent=2))
+    return 0 if len(det.rects) else 1
