@@ -14,8 +14,6 @@ when the scene was labelled, ``positives`` (physics-labelled positives ranked be
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import cv2
 import numpy as np
 
@@ -169,29 +167,29 @@ DETECTORS = {
 
 
 def load_detector(name_or_path):
-    """A detector from a built-in name or a saved model path.
+    """A detector from a built-in name or a saved DLSR model.
 
     Parameters
     ----------
     name_or_path : str or Path
-        ``"random"``, ``"mask-pca"``, ``"oracle"``, or the path of a saved model.
+        ``"random"``, ``"mask-pca"``, ``"oracle"``, or the path of a model saved by
+        :meth:`dlsr.detection.DLSRDetector.save` (``.npz`` + ``.json``, with or without the
+        suffix); it detects with the options saved in the model.
 
     Raises
     ------
     FileNotFoundError
-        If it is neither a built-in name nor an existing path.
-    ValueError
-        If it is a path: loading saved models arrives with the DLSR detector issue.
+        If it is neither a built-in name nor an existing model.
     """
     key = str(name_or_path)
     if key in DETECTORS:
         return DETECTORS[key]()
-    path = Path(key)
-    if path.exists():
-        raise ValueError(
-            f"cannot load detector model {path}: loading saved models is not supported yet "
-            f"(built-in detectors: {', '.join(DETECTORS)})"
-        )
+    from dlsr.detection import DLSRDetector
+
+    npz, js = DLSRDetector._paths(key)
+    if npz.exists() or js.exists():
+        return DLSRDetector.load(key).detector()  # names the missing or broken file
     raise FileNotFoundError(
-        f"unknown detector {key!r}: not one of {', '.join(DETECTORS)} and no such model file"
+        f"unknown detector {key!r}: not one of {', '.join(DETECTORS)} and no saved model "
+        f"({npz} + {js})"
     )

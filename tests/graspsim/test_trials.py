@@ -91,8 +91,22 @@ def test_detector_loader_errors(tmp_path):
         load_detector("no-such-detector")
     model = tmp_path / "model.npz"
     model.write_bytes(b"")
-    with pytest.raises(ValueError, match="not supported yet"):
+    with pytest.raises(FileNotFoundError, match="model.json"):
         load_detector(model)
+
+
+def test_saved_dlsr_model_plugs_into_trials(tmp_path, box_samples):
+    from dlsr.detection import DenseDetector, train_detector
+
+    model = train_detector(box_samples(6), n_atoms=8, n_patches=2000, random_state=0)
+    model.save(tmp_path / "m")
+    det = load_detector(tmp_path / "m.npz")
+    assert isinstance(det, DenseDetector)
+    s = box_samples(1)[0]
+    obs = {"rgb": s.rgb, "depth": s.depth, "depth_valid": s.depth_valid.astype(np.uint8)}
+    a = det.predict(obs)
+    b = load_detector(tmp_path / "m").predict(obs)
+    assert a and [r.as_array().tolist() for r in a] == [r.as_array().tolist() for r in b]
 
 
 def test_dataset_in_cornell_layout_loads(tmp_path, easy_objects):
