@@ -61,7 +61,7 @@ class RunConfig:
     rescore : int
         Dense detector: the best candidates rescored exactly.
     detection_images : int or None
-        At most this many test images per detection fold (None: all).
+        At most this many labelled images in the detection cross-validation (None: all).
     trials : int
         Simulated grasp trials per detector on the test objects.
     trial_candidates : int
