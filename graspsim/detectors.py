@@ -14,7 +14,6 @@ when the scene was labelled, ``positives`` (physics-labelled positives ranked be
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from dlsr.rectangles import GraspRectangle
@@ -68,52 +67,27 @@ class RandomDetector:
         ]
 
 
-def object_mask_from_depth(depth, valid, min_height: float = 0.006, stride: int = 4,
-                           iterations: int = 4) -> np.ndarray:
-    """Pixels standing above the dominant plane (the table), largest connected blob.
+def object_mask_from_depth(depth, valid, min_height: float = 0.006) -> np.ndarray:
+    """Pixels standing more than ``min_height`` (m) above the table plane, largest blob.
 
-    For a plane ``n . X = d`` seen by a pinhole camera, ``1/z = a u + b v + c``; the plane is
-    fitted robustly (least squares, re-fitted on the inliers) on a ``stride`` subsampled grid.
+    The observation-side name for :func:`dlsr.detection.table_plane_mask` (RANSAC plane in
+    inverse depth, restricted to the table's convex hull), so the baselines and the DLSR
+    detectors find the object the same way.
 
     Parameters
     ----------
     depth : ndarray of shape (H, W), float, metres (0 where missing)
     valid : ndarray of shape (H, W)
     min_height : float
-        Metres an object pixel stands in front of the plane (along the ray).
 
     Returns
     -------
     ndarray of shape (H, W), bool
         Empty when nothing stands out.
     """
-    depth = np.asarray(depth, dtype=np.float64)
-    valid = np.asarray(valid).astype(bool) & (depth > 0)
-    H, W = depth.shape
-    if valid.sum() < 50:
-        return np.zeros((H, W), dtype=bool)
-    vs, us = np.mgrid[0:H:stride, 0:W:stride]
-    sub_valid = valid[::stride, ::stride]
-    u, v = us[sub_valid].astype(float), vs[sub_valid].astype(float)
-    inv = 1.0 / depth[::stride, ::stride][sub_valid]
-    A = np.column_stack([u, v, np.ones_like(u)])
-    keep = np.ones(len(u), dtype=bool)
-    coef = np.zeros(3)
-    for _ in range(iterations):
-        coef, *_ = np.linalg.lstsq(A[keep], inv[keep], rcond=None)
-        z_plane = 1.0 / np.maximum(A @ coef, 1e-6)
-        resid = z_plane - 1.0 / inv
-        keep = np.abs(resid) < max(3 * np.median(np.abs(resid[keep])), 0.002)
-    vv, uu = np.mgrid[0:H, 0:W]
-    z_plane = 1.0 / np.maximum(coef[0] * uu + coef[1] * vv + coef[2], 1e-6)
-    mask = valid & (z_plane - depth > min_height)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
-    if n <= 1:
-        return np.zeros((H, W), dtype=bool)
-    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    if stats[best, cv2.CC_STAT_AREA] < 20:
-        return np.zeros((H, W), dtype=bool)
-    return labels == best
+    from dlsr.detection import table_plane_mask
+
+    return table_plane_mask(depth, valid, min_height=min_height)
 
 
 class MaskPCADetector:
