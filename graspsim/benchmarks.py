@@ -9,6 +9,7 @@ import numpy as np
 
 from dlsr import recognition as rec
 from dlsr.features import ENCODERS, LEARNERS
+from dlsr.metrics import jaccard_matrix, rectangle_metric
 
 log = logging.getLogger(__name__)
 
@@ -138,13 +139,33 @@ def _recognition_choice(path, learner: str, encoder: str):
     raise ValueError(f"{path}: no {learner}-{encoder} cell to take hyper-parameters from")
 
 
+def _detect_one(det, s, baselines, seed, base: dict) -> dict:
+    """Detect on one labelled image and score it and the baselines by the rectangle metric."""
+    obs = _obs(s)
+    d = det.detect(obs)
+    rec_ = {**base, "image_id": s.image_id, "object_id": s.object_id, "seconds": d.seconds,
+            "n_candidates": d.n_candidates, "n_encodings": d.n_encodings, "reason": d.reason}
+    if len(d.rects):
+        top = d.rects[0]
+        rec_.update(rect=top.tolist(), score=float(d.scores[0]),
+                    success=rectangle_metric(top, s.positives),
+                    jaccard=float(jaccard_matrix(top, s.positives).max()))
+    else:
+        rec_.update(rect=None, score=None, success=False, jaccard=0.0)
+    rec_["baselines"] = {}
+    for name, b in baselines.items():
+        rects = b.predict(dict(obs, seed=seed))
+        rec_["baselines"][name] = bool(rects) and rectangle_metric(rects[0], s.positives)
+    return rec_
+
+
 def detection_benchmark(
     data, format: str, out, scale=None, mapping=None, split: str = "object",
     learner: str = "NKM", encoder: str = "Natural", encoder_param=None, C: float | None = None,
     recognition_json=None, detector: str = "dense", n_folds: int = 5, n_atoms: int = 300,
     n_patches: int = 100_000, region: str = "auto", rescore: int = 300,
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
-    save_model=None, seed: int = 0, progress: bool = True,
+    save_model=None, seed: int = 0, progress: bool = True, executor=None,
 ) -> dict:
     """Cross-validated detection accuracy by the rectangle metric (the paper's Table 2).
 
@@ -159,6 +180,10 @@ def detection_benchmark(
     Writes ``detection.json`` (accuracy per fold and overall, seconds per image, candidates per
     second, baselines), ``table2.md`` and ``overlays/{best,worst}_*.png`` (detection in red and
     blue, the labelled positives in yellow and grey).
+
+    Test images of a fold are detected through ``executor`` (a
+    :class:`graspsim.executor.Executor`: local processes or a Ray cluster; sequential when
+    None); results are written in image order as they arrive.
 
     Returns
     -------
@@ -175,7 +200,6 @@ def detection_benchmark(
 
     from dlsr import datasets
     from dlsr.detection import DLSRDetector, train_detector
-    from dlsr.metrics import jaccard_matrix, rectangle_metric
     from dlsr.rectangles import as_rect_array
     from dlsr.viz import draw_rectangles
 
@@ -230,6 +254,11 @@ def detection_benchmark(
             if rec_.get("config_key") == key:
                 done[rec_["image_id"]] = rec_
     baselines = {"random": ObjectRandomDetector(region=region), "mask-pca": MaskPCADetector()}
+    if executor is None:
+        from .executor import Executor
+
+        executor = Executor("sequential", progress=False)
+    ex = executor
     t_run = time.perf_counter()
     rd = None
     bar = tqdm(total=len(samples), initial=len(done), desc="detection", disable=not progress)
@@ -254,29 +283,12 @@ def detection_benchmark(
         det = model.detector(detector, region=region, rescore=rescore,
                              **({"coarse_to_fine": True} if coarse_to_fine else {})) \
             if detector == "dense" else model.detector("exact", region=region)
-        for i in todo:
-            s = samples[i]
-            obs = _obs(s)
-            d = det.detect(obs)
-            rec_ = {"config_key": key, "fold": k, "image_id": s.image_id,
-                    "object_id": s.object_id, "seconds": d.seconds,
-                    "n_candidates": d.n_candidates, "n_encodings": d.n_encodings,
-                    "reason": d.reason}
-            if len(d.rects):
-                top = d.rects[0]
-                rec_.update(rect=top.tolist(), score=float(d.scores[0]),
-                            success=rectangle_metric(top, s.positives),
-                            jaccard=float(jaccard_matrix(top, s.positives).max()))
-            else:
-                rec_.update(rect=None, score=None, success=False, jaccard=0.0)
-            rec_["baselines"] = {}
-            for name, b in baselines.items():
-                bo = dict(obs, seed=seed + i)
-                rects = b.predict(bo)
-                rec_["baselines"][name] = bool(rects) and rectangle_metric(rects[0], s.positives)
+        tasks = [(det, samples[i], baselines, seed + i, {"config_key": key, "fold": k})
+                 for i in todo]
+        for rec_ in ex.imap(_detect_one, tasks, desc=f"fold {k}", star=True):
             with results_path.open("a") as fh:
                 fh.write(json.dumps(rec_) + "\n")
-            done[s.image_id] = rec_
+            done[rec_["image_id"]] = rec_
             bar.update(1)
     bar.close()
     recs = [done[s.image_id] for s in samples]

@@ -61,7 +61,13 @@ class Executor:
             raise ValueError("address is only meaningful with backend='ray'")
 
     @contextlib.contextmanager
-    def _context(self):
+    def activate(self):
+        """Make this backend joblib's default inside the block.
+
+        Code that uses ``joblib.Parallel`` without naming a backend (for example
+        :func:`dlsr.recognition.nested_cv_cell`, whose folds run in parallel) then runs its
+        tasks here, Ray included.
+        """
         if self.backend == "sequential":
             with parallel_config(backend="sequential"):
                 yield
@@ -109,7 +115,7 @@ class Executor:
         def calls(chunk):
             return (delayed(fn)(*t) if star else delayed(fn)(t) for t in chunk)
 
-        with self._context(), tqdm(total=total, desc=desc, disable=not self.progress) as bar:
+        with self.activate(), tqdm(total=total, desc=desc, disable=not self.progress) as bar:
             if self.backend != "ray":
                 for result in Parallel(return_as="generator")(calls(tasks)):
                     bar.update(1)

@@ -249,12 +249,14 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
 
         t0 = time.perf_counter()
         data = rec.recognition_data(samples, random_state=seeds["recognition"])
-        summary = rec.run_recognition_benchmark(
-            data, root / "recognition", learners=[config.learner], encoders=[config.encoder],
-            split="object", n_folds=config.folds, inner_folds=config.inner_folds,
-            n_atoms=config.n_atoms, n_patches=config.n_patches,
-            random_state=seeds["recognition"], n_jobs=config.jobs, progress=progress,
-        )
+        with ex.activate():  # the CV folds run on the chosen backend (joblib inside dlsr)
+            summary = rec.run_recognition_benchmark(
+                data, root / "recognition", learners=[config.learner],
+                encoders=[config.encoder], split="object", n_folds=config.folds,
+                inner_folds=config.inner_folds, n_atoms=config.n_atoms,
+                n_patches=config.n_patches, random_state=seeds["recognition"],
+                n_jobs=config.jobs, progress=progress,
+            )
         cell = summary["cells"][0]
         stages.finish("recognition", {
             "accuracy": cell["accuracy"], "std": cell["std"],
@@ -273,7 +275,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
             detector=config.detector, n_folds=config.folds, n_atoms=config.n_atoms,
             n_patches=config.n_patches, seed=seeds["detection"], progress=progress,
             coarse_to_fine=config.coarse_to_fine, rescore=config.rescore,
-            max_images=config.detection_images,
+            max_images=config.detection_images, executor=ex,
         )
         stages.finish("detection", {
             k: det.get(k) for k in ("accuracy", "baselines", "seconds_per_image")
