@@ -41,6 +41,10 @@ __all__ = [
     "read_cornell_rectangles",
     "read_jacquard_grasps",
     "read_pcd_depth",
+    "read_rgb",
+    "read_gray",
+    "read_depth_image",
+    "clean_depth",
     "resize_sample",
     "sample_negatives",
     "groups",
@@ -94,7 +98,9 @@ class GraspSample:
 # Small readers
 
 
-def _read_rgb(path: Path) -> np.ndarray:
+def read_rgb(path: Path) -> np.ndarray:
+    """An image file as (H, W, 3) uint8 RGB; clear errors naming the file."""
+    path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"image file not found: {path}")
     try:
@@ -104,7 +110,9 @@ def _read_rgb(path: Path) -> np.ndarray:
         raise ValueError(f"cannot read image {path}: {exc}") from exc
 
 
-def _read_gray(path: Path) -> np.ndarray:
+def read_gray(path: Path) -> np.ndarray:
+    """An image file as (H, W) uint8 gray; clear errors naming the file."""
+    path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"image file not found: {path}")
     try:
@@ -114,13 +122,18 @@ def _read_gray(path: Path) -> np.ndarray:
         raise ValueError(f"cannot read image {path}: {exc}") from exc
 
 
-def _read_float_tiff(path: Path) -> np.ndarray:
-    """A single-channel float TIFF as float32 (Pillow reads the real LZW-compressed files)."""
+def read_depth_image(path: Path) -> np.ndarray:
+    """A single-channel depth image as float32: a float TIFF (Pillow reads the real
+    LZW-compressed files) or a ``.npy`` array."""
+    path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"depth file not found: {path}")
     try:
-        with Image.open(path) as im:
-            arr = np.array(im)
+        if path.suffix == ".npy":
+            arr = np.load(path, allow_pickle=False)
+        else:
+            with Image.open(path) as im:
+                arr = np.array(im)
     except (UnidentifiedImageError, OSError, ValueError) as exc:
         raise ValueError(f"cannot read depth image {path}: {exc}") from exc
     if arr.ndim != 2:
@@ -128,7 +141,7 @@ def _read_float_tiff(path: Path) -> np.ndarray:
     return arr.astype(np.float32)
 
 
-def _clean_depth(raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def clean_depth(raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Depth with 0 where missing (non-finite or <= 0, e.g. Jacquard's -1) and its validity."""
     valid = np.isfinite(raw) & (raw > 0)
     depth = np.where(valid, raw, 0).astype(np.float32)
@@ -425,13 +438,13 @@ def load_cornell(
         stem = rgb_path.name[:-len("r.png")]  # pcdXXXX
         image_id = _norm_image_id(_CORNELL_RGB.match(rgb_path.name).group(1))
         folder = rgb_path.parent
-        rgb = _read_rgb(rgb_path)
+        rgb = read_rgb(rgb_path)
         shape = rgb.shape[:2]
         pcd, tiff = folder / f"{stem}.txt", folder / f"{stem}d.tiff"
         if depth_source in ("auto", "pcd") and pcd.is_file():
             depth, valid = read_pcd_depth(pcd, shape)
         elif depth_source in ("auto", "tiff") and tiff.is_file():
-            depth, valid = _clean_depth(_read_float_tiff(tiff))
+            depth, valid = clean_depth(read_depth_image(tiff))
             _check_shape(tiff, depth, shape, "depth image")
         else:
             wanted = {"auto": f"{pcd.name} or {tiff.name}", "pcd": pcd.name, "tiff": tiff.name}
@@ -647,13 +660,13 @@ def load_jacquard(root, depth: str = "stereo", scale: float = 1.0) -> list[Grasp
     samples = []
     for obj, _view, prefix, rgb_path in found:
         folder = rgb_path.parent
-        rgb = _read_rgb(rgb_path)
+        rgb = read_rgb(rgb_path)
         shape = rgb.shape[:2]
         depth_path = folder / f"{prefix}_{depth}_depth.tiff"
-        d, valid = _clean_depth(_read_float_tiff(depth_path))
+        d, valid = clean_depth(read_depth_image(depth_path))
         _check_shape(depth_path, d, shape, "depth image")
         mask_path = folder / f"{prefix}_mask.png"
-        mask = _read_gray(mask_path) > 0
+        mask = read_gray(mask_path) > 0
         _check_shape(mask_path, mask, shape, "mask")
         grasps = read_jacquard_grasps(folder / f"{prefix}_grasps.txt")
         if not grasps:

@@ -1222,38 +1222,6 @@ def _window_sum(a: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 
 
-def _read_depth_file(path: Path):
-    from PIL import Image, UnidentifiedImageError
-
-    if not path.is_file():
-        raise FileNotFoundError(f"depth file not found: {path}")
-    try:
-        if path.suffix == ".npy":
-            raw = np.load(path, allow_pickle=False)
-        else:
-            with Image.open(path) as im:
-                raw = np.array(im)
-    except (UnidentifiedImageError, OSError, ValueError) as exc:
-        raise ValueError(f"cannot read depth image {path}: {exc}") from exc
-    if raw.ndim != 2:
-        raise ValueError(f"depth image {path} must have one channel, got shape {raw.shape}")
-    raw = raw.astype(np.float32)
-    valid = np.isfinite(raw) & (raw > 0)
-    return np.where(valid, raw, 0).astype(np.float32), valid
-
-
-def _read_image_file(path: Path, mode: str):
-    from PIL import Image, UnidentifiedImageError
-
-    if not path.is_file():
-        raise FileNotFoundError(f"image file not found: {path}")
-    try:
-        with Image.open(path) as im:
-            return np.array(im.convert(mode))
-    except (UnidentifiedImageError, OSError, ValueError) as exc:
-        raise ValueError(f"cannot read image {path}: {exc}") from exc
-
-
 def detect_files(model, rgb, depth, mask=None, background=None, depth_units: float = 1.0,
                  detector: str | None = None, top_k: int = 5, out=None, **options):
     """Detect grasps in one RGB-D image read from files (the ``graspsim detect`` command).
@@ -1284,15 +1252,17 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
     """
     if not isinstance(model, DLSRDetector):
         model = DLSRDetector.load(model)
-    rgb_arr = _read_image_file(Path(rgb), "RGB")
-    d, valid = _read_depth_file(Path(depth))
+    from .datasets import clean_depth, read_depth_image, read_gray, read_rgb
+
+    rgb_arr = read_rgb(rgb)
+    d, valid = clean_depth(read_depth_image(depth))
     if d.shape != rgb_arr.shape[:2]:
         raise ValueError(f"depth {depth} has shape {d.shape}, the image {rgb} "
                          f"{rgb_arr.shape[:2]}")
     obs = {"rgb": rgb_arr, "depth": d * np.float32(depth_units), "depth_valid": valid}
     if mask is not None:
-        obs["mask"] = _read_image_file(Path(mask), "L") > 0
-    bg = None if background is None else _read_image_file(Path(background), "RGB")
+        obs["mask"] = read_gray(mask) > 0
+    bg = None if background is None else read_rgb(background)
     det = model.detector(detector, top_k=top_k, background=bg, **options).detect(obs)
     if out is not None:
         from PIL import Image
