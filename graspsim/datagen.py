@@ -47,14 +47,10 @@ def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects
     """One labelled scene as a :class:`dlsr.datasets.GraspSample` (plus labelling counts)."""
     from dlsr.datasets import GraspSample
 
-    from .scene import build_scene, capture, make_scene
-    from .trials import trial_streams
+    from .trials import observe_scene
 
     sim = _sim()
-    st = trial_streams(seed, index)
-    scene = make_scene(sim, specs, st["scene"], n_objects=n_objects)
-    bodies = build_scene(sim, scene)
-    frame = capture(sim, scene, bodies, st["camera"])
+    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects)
     cands = sample_candidates(frame.segmentation, bodies.objects, st["label"], n_candidates,
                               depth=frame.depth_clean)
     labelled = label_rectangles(sim, scene, frame, cands)
@@ -171,14 +167,10 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
 def _patch_scene(specs, seed, index, rects_per_scene, n_objects):
     from dlsr.preprocess import rectangle_images
 
-    from .scene import build_scene, capture, make_scene
-    from .trials import trial_streams
+    from .trials import observe_scene
 
     sim = _sim()
-    st = trial_streams(seed, index)
-    scene = make_scene(sim, specs, st["scene"], n_objects=n_objects)
-    bodies = build_scene(sim, scene)
-    frame = capture(sim, scene, bodies, st["camera"])
+    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects)
     rects = sample_candidates(frame.segmentation, bodies.objects, st["label"], rects_per_scene,
                               depth=frame.depth_clean)
     if not rects:

@@ -139,9 +139,8 @@ def _trial_gifs(root: Path, records: list[dict], config, pics: Path) -> list[tup
     """Replay the first successful and the first failed DLSR trial as GIFs."""
     from dlsr.rectangles import GraspRectangle
 
-    from .scene import build_scene, capture, make_scene
     from .sim import Simulation
-    from .trials import resolve_objects, trial_streams
+    from .trials import observe_scene, resolve_objects
     from .trialviz import save_gif, trial_frames
 
     chosen = []
@@ -156,10 +155,7 @@ def _trial_gifs(root: Path, records: list[dict], config, pics: Path) -> list[tup
     out = []
     try:
         for ok, r in chosen:
-            st = trial_streams(r["seed"], r["index"])
-            scene = make_scene(sim, specs, st["scene"])
-            bodies = build_scene(sim, scene)
-            frame = capture(sim, scene, bodies, st["camera"])
+            scene, _, frame, _ = observe_scene(sim, specs, r["seed"], r["index"])
             frames, _ = trial_frames(sim, scene, frame, GraspRectangle(*r["rectangle"]))
             path = pics / f"trial_{'success' if ok else 'failure'}.gif"
             save_gif(frames, path)

@@ -113,6 +113,25 @@ def trial_streams(seed: int, index: int) -> dict:
     }
 
 
+def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1):
+    """Build trial ``index``'s seeded scene in ``sim`` and take its observation.
+
+    Returns
+    -------
+    scene : Scene
+    bodies : the loaded bodies (see :func:`graspsim.scene.build_scene`)
+    frame : RGBDFrame
+    streams : dict
+        The trial's generators (:func:`trial_streams`); ``"label"`` and ``"detector_seed"``
+        are still unused.
+    """
+    st = trial_streams(seed, index)
+    scene = make_scene(sim, specs, st["scene"], n_objects=n_objects)
+    bodies = build_scene(sim, scene)
+    frame = capture(sim, scene, bodies, st["camera"])
+    return scene, bodies, frame, st
+
+
 _WORKER = {}
 
 
@@ -144,10 +163,7 @@ def run_trial(sim, specs, detector, seed: int, index: int,
         ``n_labelled``, ``seconds``).
     """
     t0 = time.perf_counter()
-    st = trial_streams(seed, index)
-    scene = make_scene(sim, specs, st["scene"], n_objects=config.n_objects)
-    bodies = build_scene(sim, scene)
-    frame = capture(sim, scene, bodies, st["camera"])
+    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects)
     obs = {"rgb": frame.rgb, "depth": frame.depth,
            "depth_valid": frame.depth_valid.astype(np.uint8), "seed": st["detector_seed"]}
     positives, n_labelled = None, 0

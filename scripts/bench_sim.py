@@ -25,7 +25,13 @@ from graspsim.grasp import rectangle_to_grasp
 from graspsim.labelling import label_rectangles, sample_candidates
 from graspsim.scene import build_scene, capture, make_scene
 from graspsim.sim import Simulation
-from graspsim.trials import TrialConfig, resolve_objects, run_trials, trial_streams
+from graspsim.trials import (
+    TrialConfig,
+    observe_scene,
+    resolve_objects,
+    run_trials,
+    trial_streams,
+)
 
 
 def render_ms(specs, n=10):
@@ -52,10 +58,7 @@ def label_rate(specs, n_scenes, n_candidates=32):
     sim = Simulation()
     n_rects, n_exec, seconds, positives = 0, 0, 0.0, []
     for i in range(n_scenes):
-        st = trial_streams(321, i)
-        scene = make_scene(sim, specs, st["scene"])
-        bodies = build_scene(sim, scene)
-        frame = capture(sim, scene, bodies, st["camera"])
+        scene, bodies, frame, st = observe_scene(sim, specs, 321, i)
         cands = sample_candidates(frame.segmentation, bodies.objects, st["label"], n_candidates,
                                   depth=frame.depth_clean)
         t = time.perf_counter()

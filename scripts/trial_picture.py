@@ -12,9 +12,8 @@ import argparse
 
 from graspsim.labelling import label_rectangles, rank_positives, sample_candidates
 from graspsim.objects import builtin_objects
-from graspsim.scene import build_scene, capture, make_scene
 from graspsim.sim import Simulation
-from graspsim.trials import trial_streams
+from graspsim.trials import observe_scene
 from graspsim.trialviz import save_gif, save_strip, trial_frames
 
 
@@ -29,10 +28,7 @@ def main(argv=None) -> int:
         raise SystemExit(f"unknown object {args.object!r}")
     sim = Simulation()
     for i in range(20):
-        st = trial_streams(args.seed, i)
-        scene = make_scene(sim, specs, st["scene"])
-        bodies = build_scene(sim, scene)
-        frame = capture(sim, scene, bodies, st["camera"])
+        scene, bodies, frame, st = observe_scene(sim, specs, args.seed, i)
         cands = sample_candidates(frame.segmentation, bodies.objects, st["label"], 32,
                                   depth=frame.depth_clean)
         positives = rank_positives(label_rectangles(sim, scene, frame, cands))
