@@ -45,6 +45,7 @@ from .features import (
     fit_representation,
     rectangle_features,
 )
+from .records import read_jsonl
 from .svm import FeatureStandardizer, SquaredHingeSVC
 
 __all__ = [
@@ -406,18 +407,8 @@ def run_recognition_benchmark(
     }
     key = _config_key(config)
     results_path = out / "results.jsonl"
-    done = {}
-    if results_path.exists():
-        for line in results_path.read_text().splitlines():
-            if not line.strip():
-                continue
-            try:
-                rec = json.loads(line)
-            except json.JSONDecodeError:
-                log.warning("%s: skipping a truncated line", results_path)
-                continue
-            if rec.get("config_key") == key:
-                done[(rec["learner"], rec["encoder"])] = rec
+    done = {(rec["learner"], rec["encoder"]): rec for rec in read_jsonl(results_path)
+            if rec.get("config_key") == key}
     cells = [(lrn, enc) for lrn in learners for enc in encoders]
     todo = [c for c in cells if c not in done]
     if done:
@@ -505,15 +496,9 @@ def plot_figure5(
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    points = {}
     cache = Path(cache) if cache is not None else None
-    if cache is not None and cache.exists():
-        for line in cache.read_text().splitlines():
-            try:
-                r = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            points[(r["learner"], r["encoder"], r["n_atoms"], r["whiten"])] = r["accuracy"]
+    points = {(r["learner"], r["encoder"], r["n_atoms"], r["whiten"]): r["accuracy"]
+              for r in (read_jsonl(cache) if cache is not None else [])}
     for lrn, enc in combinations:
         for whiten in (True, False):
             for d in sizes:

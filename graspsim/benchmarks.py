@@ -10,6 +10,7 @@ import numpy as np
 from dlsr import recognition as rec
 from dlsr.features import ENCODERS, LEARNERS
 from dlsr.metrics import jaccard_matrix, rectangle_metric
+from dlsr.records import read_jsonl
 
 log = logging.getLogger(__name__)
 
@@ -243,16 +244,7 @@ def detection_benchmark(
                                         "n_patches", "n_images", "seed")}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
-    done: dict[str, dict] = {}
-    if results_path.exists():
-        for line in results_path.read_text().splitlines():
-            try:
-                rec_ = json.loads(line)
-            except json.JSONDecodeError:
-                log.warning("%s: skipping a truncated line", results_path)
-                continue
-            if rec_.get("config_key") == key:
-                done[rec_["image_id"]] = rec_
+    done = {r["image_id"]: r for r in read_jsonl(results_path) if r.get("config_key") == key}
     baselines = {"random": ObjectRandomDetector(region=region), "mask-pca": MaskPCADetector()}
     if executor is None:
         from .executor import Executor

@@ -107,16 +107,9 @@ def render_html(blocks, base: Path, title: str) -> str:
 
 
 def _trial_records(root: Path, name: str) -> list[dict]:
-    path = root / "trials" / name / "trials.jsonl"
-    if not path.exists():
-        return []
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
-    return sorted(out, key=lambda r: r["index"])
+    from dlsr.records import read_jsonl
+
+    return sorted(read_jsonl(root / "trials" / name / "trials.jsonl"), key=lambda r: r["index"])
 
 
 def _mosaic(root: Path, pics: Path) -> str | None:

@@ -211,24 +211,25 @@ def _trial_task(specs, detector, seed, index, config, params):
 
 
 def read_done(path: Path) -> dict[int, dict]:
-    """Complete records of a JSONL file; a torn last line is dropped and the file rewritten."""
+    """Complete records of a JSONL file by index; a torn line is dropped and the file rewritten
+    (so appended records start on a line of their own)."""
+    from dlsr.records import read_jsonl
+
+    path = Path(path)
     if not path.exists():
         return {}
-    done, good, torn = {}, [], False
-    for line in path.read_text().splitlines():
+    done: dict[int, dict] = {}
+    for rec in read_jsonl(path):
         try:
-            rec = json.loads(line)
-            idx = int(rec["index"])
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-            torn = True
+            done.setdefault(int(rec["index"]), rec)
+        except (KeyError, TypeError, ValueError):
             continue
-        if idx not in done:
-            done[idx] = rec
-            good.append(line)
-    if torn or not path.read_text().endswith("\n") and good:
+    text = path.read_text()
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if len(lines) != len(done) or (lines and not text.endswith("\n")):
         log.warning("%s: dropped an incomplete line left by an interrupted run", path)
         tmp = path.with_suffix(".jsonl.tmp")
-        tmp.write_text("".join(g + "\n" for g in good))
+        tmp.write_text("".join(json.dumps(r) + "\n" for r in done.values()))
         tmp.replace(path)
     return done
 
