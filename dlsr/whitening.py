@@ -197,7 +197,21 @@ def _validate_mask(mask, X, est):
     return mask.astype(bool, copy=False)
 
 
-class PatchStandardizer(OneToOneFeatureMixin, TransformerMixin, BaseEstimator):
+class _MaskedPatchTransformer(OneToOneFeatureMixin, TransformerMixin, BaseEstimator):
+    """What both patch transformers share: the mask reaches ``transform`` from ``fit_transform``
+    (scikit-learn's default would drop it), and float32 stays float32."""
+
+    def fit_transform(self, X, y=None, mask=None):
+        """``fit(X, mask=mask).transform(X, mask=mask)``."""
+        return self.fit(X, y, mask=mask).transform(X, mask=mask)
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.transformer_tags.preserves_dtype = ["float64", "float32"]
+        return tags
+
+
+class PatchStandardizer(_MaskedPatchTransformer):
     """Per-patch group standardisation (:func:`standardize_patches`) as a transformer.
 
     Stateless: ``fit`` only records the number of features.
@@ -230,17 +244,9 @@ class PatchStandardizer(OneToOneFeatureMixin, TransformerMixin, BaseEstimator):
         mask = _validate_mask(mask, X, self)
         return standardize_patches(X, mask, eps=self.eps)
 
-    def fit_transform(self, X, y=None, mask=None):
-        """``fit(X, mask=mask).transform(X, mask=mask)``."""
-        return self.fit(X, y, mask=mask).transform(X, mask=mask)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.transformer_tags.preserves_dtype = ["float64", "float32"]
-        return tags
 
 
-class ZCAWhitening(OneToOneFeatureMixin, TransformerMixin, BaseEstimator):
+class ZCAWhitening(_MaskedPatchTransformer):
     """Masked ZCA whitening (:func:`fit_zca`, :func:`apply_zca`) as a transformer.
 
     Parameters
@@ -274,14 +280,6 @@ class ZCAWhitening(OneToOneFeatureMixin, TransformerMixin, BaseEstimator):
         mask = _validate_mask(mask, X, self)
         return apply_zca(X, mask, self.mean_, self.whitening_)
 
-    def fit_transform(self, X, y=None, mask=None):
-        """``fit(X, mask=mask).transform(X, mask=mask)``."""
-        return self.fit(X, y, mask=mask).transform(X, mask=mask)
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.transformer_tags.preserves_dtype = ["float64", "float32"]
-        return tags
 
 
 #: Default instances for the shared ``parametrize_with_checks`` test.
