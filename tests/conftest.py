@@ -7,8 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dlsr.datasets import GraspSample, write_cornell
-from dlsr.rectangles import GraspRectangle
+from dlsr.datasets import (
+    GraspSample,
+    clean_depth,
+    read_depth_image,
+    read_jacquard_grasps,
+    read_rgb,
+    write_cornell,
+)
+from dlsr.rectangles import GraspRectangle, rects_to_array
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
@@ -28,6 +35,23 @@ def shared_data() -> Path:
 @pytest.fixture(scope="session")
 def jacquard_root() -> Path:
     return _require(SHARED_DATA / "jacquard_samples")
+
+
+JACQUARD_VIEW = "1a9fa4c269cfcc1b738e43095496b061/0_1a9fa4c269cfcc1b738e43095496b061"
+
+
+@pytest.fixture(scope="session")
+def jacquard_view(jacquard_root):
+    """``jacquard_view(depth="perfect"|"stereo", view=JACQUARD_VIEW)`` -> rgb, depth (m, 0 where
+    missing), validity and the (n, 5) rectangles of one real view, via the dataset readers."""
+
+    def load(depth: str = "perfect", view: str = JACQUARD_VIEW):
+        prefix = str(jacquard_root / view)
+        d, valid = clean_depth(read_depth_image(Path(f"{prefix}_{depth}_depth.tiff")))
+        rects = rects_to_array(read_jacquard_grasps(Path(f"{prefix}_grasps.txt")))
+        return read_rgb(Path(f"{prefix}_RGB.png")), d, valid, rects
+
+    return load
 
 
 @pytest.fixture(scope="session")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from dlsr.patches import extract_patches, load_patch_file, sample_patches, save_patch_file
 from dlsr.preprocess import rectangle_images
@@ -142,19 +141,14 @@ def test_patch_file_roundtrip_and_bad_files(tmp_path):
         save_patch_file(tmp_path / "x.npz", P, Q[:3])
 
 
-def _jacquard_crops(root, n=40):
-    """Rectangle images of the first grasps of one Jacquard view (stereo depth), via Pillow."""
-    prefix = str(root / "1a9fa4c269cfcc1b738e43095496b061" / "0_1a9fa4c269cfcc1b738e43095496b061")
-    rgb = np.array(Image.open(prefix + "_RGB.png").convert("RGB"))
-    d = np.array(Image.open(prefix + "_stereo_depth.tiff"), dtype=np.float32)
-    valid = np.isfinite(d) & (d > 0)
-    g = np.loadtxt(prefix + "_grasps.txt", delimiter=";", ndmin=2)[:n]
-    rects = np.column_stack([g[:, 0], g[:, 1], -np.radians(g[:, 2]), g[:, 3], g[:, 4]])
-    return rectangle_images(rgb, np.where(valid, d, 0), valid, rects)
+def _jacquard_crops(view, n=40):
+    """Rectangle images of the first grasps of one real Jacquard view (stereo depth)."""
+    rgb, d, valid, rects = view(depth="stereo")
+    return rectangle_images(rgb, d, valid, rects[:n])
 
 
-def test_real_patches(jacquard_root):
-    im, mk = _jacquard_crops(jacquard_root)
+def test_real_patches(jacquard_view):
+    im, mk = _jacquard_crops(jacquard_view)
     X, M = extract_patches(im, mk)
     assert X.shape == (40, 361, 288) and np.all(np.isfinite(X))
     Xs, Ms = sample_patches(im, mk, n_patches=5000, random_state=0)

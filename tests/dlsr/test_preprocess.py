@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from PIL import Image
@@ -19,8 +17,6 @@ from dlsr.preprocess import (
     surface_normals,
 )
 from dlsr.rectangles import GraspRectangle
-
-JACQUARD_VIEW = "1a9fa4c269cfcc1b738e43095496b061/0_1a9fa4c269cfcc1b738e43095496b061"
 
 
 def _scene(H=60, W=80, seed=0, a=0.001, b=0.002):
@@ -43,19 +39,6 @@ def _smooth_scene(H=64, W=64, seed=1):
 def _unit(v):
     v = np.asarray(v, float)
     return v / np.linalg.norm(v)
-
-
-def load_jacquard_view(root: Path, view: str = JACQUARD_VIEW, depth: str = "perfect"):
-    """RGB, depth (metres, 0 where missing), validity and (n, 5) rectangles, read with Pillow."""
-    prefix = str(root / view)
-    rgb = np.array(Image.open(prefix + "_RGB.png").convert("RGB"))
-    d = np.array(Image.open(prefix + f"_{depth}_depth.tiff"), dtype=np.float32)
-    valid = np.isfinite(d) & (d > 0)
-    d = np.where(valid, d, 0).astype(np.float32)
-    g = np.loadtxt(prefix + "_grasps.txt", delimiter=";", ndmin=2)
-    # Jacquard angles are clockwise as displayed; the toolkit's are counter-clockwise.
-    rects = np.column_stack([g[:, 0], g[:, 1], -np.radians(g[:, 2]), g[:, 3], g[:, 4]])
-    return rgb, d, valid, rects
 
 
 # ------------------------------------------------------------------------------------------------
@@ -325,8 +308,8 @@ def _check_real(im, mk):
 
 
 @pytest.mark.parametrize("depth_kind", ["perfect", "stereo"])
-def test_real_jacquard_rectangles(jacquard_root, depth_kind):
-    rgb, depth, valid, rects = load_jacquard_view(jacquard_root, depth=depth_kind)
+def test_real_jacquard_rectangles(jacquard_view, depth_kind):
+    rgb, depth, valid, rects = jacquard_view(depth=depth_kind)
     im, mk = rectangle_images(rgb, depth, valid, rects)
     assert im.shape == (len(rects), 24, 24, 8)
     _check_real(im, mk)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from PIL import Image
 
 from dlsr.patches import sample_patches
 from dlsr.preprocess import rectangle_images
@@ -145,18 +144,14 @@ def test_transformers():
         zca.transform(Z, mask=M[:, :5])
 
 
-def _jacquard_crops(root, n=60):
-    prefix = str(root / "1a9fa4c269cfcc1b738e43095496b061" / "0_1a9fa4c269cfcc1b738e43095496b061")
-    rgb = np.array(Image.open(prefix + "_RGB.png").convert("RGB"))
-    d = np.array(Image.open(prefix + "_stereo_depth.tiff"), dtype=np.float32)
-    valid = np.isfinite(d) & (d > 0)
-    g = np.loadtxt(prefix + "_grasps.txt", delimiter=";", ndmin=2)[:n]
-    rects = np.column_stack([g[:, 0], g[:, 1], -np.radians(g[:, 2]), g[:, 3], g[:, 4]])
-    return rectangle_images(rgb, np.where(valid, d, 0), valid, rects)
+def _jacquard_crops(view, n=60):
+    """Rectangle images of the first grasps of one real Jacquard view (stereo depth)."""
+    rgb, d, valid, rects = view(depth="stereo")
+    return rectangle_images(rgb, d, valid, rects[:n])
 
 
-def test_real_patches_standardise_and_whiten(jacquard_root):
-    im, mk = _jacquard_crops(jacquard_root)
+def test_real_patches_standardise_and_whiten(jacquard_view):
+    im, mk = _jacquard_crops(jacquard_view)
     X, M = sample_patches(im, mk, n_patches=20000, random_state=0)
     Z = standardize_patches(X, M)
     assert np.all(np.isfinite(Z)) and np.all(Z[~M] == 0)
