@@ -15,26 +15,29 @@ implementation (see ``../shared/reference/dlsr-reference-facts.md``):
 
 Algorithms
 ----------
-The lasso is solved exactly by a homotopy (LARS-lasso) run on all patches of a chunk at once:
-every step is one dense matrix product over the chunk (the correlation direction), the inverse
-of each patch's active Gram block is updated by bordering (add) or Schur downdating (drop), and
-finished patches leave the batch. Large matrix products run in float32 (the correlations are
-re-synchronised exactly every 16 steps); the active-set inverses and the final coefficients,
-``a_A = G_AA^{-1} (b_A - lam s_A)`` (refined once with exact products for per-row masks), are
-float64, and every patch is checked against the lasso optimality (KKT) conditions with exact
-products; the rare patch that fails (a float32 near-tie) is solved again entirely in float64,
-and a degenerate one after that by scikit-learn's LARS. An atom that is linearly dependent on
-the active ones (e.g. a repeated atom) is kept out for that patch, as LARS does. Masked
-problems have one Gram matrix per mask: rows sharing a mask (fully valid patches, padding
-patterns; at least ``min_group`` of them) are solved as a group with that Gram matrix; the
-other rows use per-row masked products ``((W D) * m) D^T``.
+The lasso is solved exactly by a homotopy (LARS-lasso) per patch, compiled with numba
+(:mod:`dlsr._homotopy`): each step costs ``O(k d)`` (the Gram columns of the ``k`` active
+atoms) plus ``O(k^2)`` for the bordered / downdated inverse of the active Gram block, all in
+float64, and the path records the solution at every requested penalty as it crosses it
+(:func:`lasso_path`: a grid of penalties costs about as much as its smallest member). Each
+recorded solution is recomputed as ``a_A = G_AA^{-1} (b_A - lam s_A)`` with one refinement step
+and checked against the lasso optimality (KKT) conditions; a row that fails (a degenerate tie)
+is solved again by scikit-learn's LARS. An atom that is linearly dependent on the active ones
+(e.g. a repeated atom) is kept out for that patch, as LARS does. Masked problems have one Gram
+matrix per mask: rows sharing a mask (fully valid patches, padding patterns; at least
+``min_group`` of them) read that mask's Gram matrix; for the other rows the masked Gram column
+of an entering atom is computed when it enters, from the unmasked Gram matrix minus the
+masked entries' contribution (or the sum over the valid entries when fewer).
 
-OMP is batched the same way (one atom per step for every patch, bordered inverses, the Gram
-columns of the selected atoms kept per patch in float32 for the residual correlations; the
-coefficients are float64 least squares, refined with exact products for per-row masks).
+OMP is batched over all patches of a chunk (one atom per step for every patch, bordered
+inverses, the Gram columns of the selected atoms kept per patch in float32 for the residual
+correlations; the coefficients are float64 least squares, refined with exact products for
+per-row masks). The greedy selection does not depend on the final number of atoms, so one run
+gives every smaller ``L`` of a grid (:func:`omp_path`).
 
 Chunks of rows (``chunk_size``, small enough to stay in cache) run in ``n_jobs`` threads with
-single-threaded BLAS (numpy releases the GIL); the dense encoders use threaded BLAS directly.
+single-threaded BLAS (numpy and the compiled kernel release the GIL); the dense encoders use
+threaded BLAS directly.
 Results do not depend on the number of threads.
 
 Masked OMP: exact masked least squares
@@ -58,7 +61,9 @@ from threadpoolctl import threadpool_limits
 
 __all__ = [
     "lasso",
+    "lasso_path",
     "omp",
+    "omp_path",
     "soft_threshold",
     "kmeans_triangle",
     "polarity_split",
@@ -187,245 +192,8 @@ def _scatter(slots_atoms, values, d, dtype=np.float64):
     return W
 
 
-def _border_add(Ginv, slot, g, sigma):
-    """Bordered inverse after adding an atom at ``slot`` (per row).
-
-    ``g`` (r, k) holds the Gram entries between the new atom and the current slots (0 for
-    empty slots), ``sigma`` the Schur complement ``G_jj - g^T Ginv g``.
-    """
-    v = np.matmul(Ginv, g[:, :, None])[:, :, 0]
-    Ginv += v[:, :, None] * v[:, None, :] / sigma[:, None, None]
-    r = np.arange(Ginv.shape[0])
-    Ginv[r, slot, :] = -v / sigma[:, None]
-    Ginv[r, :, slot] = -v / sigma[:, None]
-    Ginv[r, slot, slot] = 1.0 / sigma
-
-
-def _border_drop(Ginv, slot):
-    """Inverse of the active Gram block after removing ``slot`` (per row)."""
-    r = np.arange(Ginv.shape[0])
-    col = Ginv[r, :, slot].copy()
-    piv = col[r, slot].copy()
-    Ginv -= col[:, :, None] * col[:, None, :] / piv[:, None, None]
-    Ginv[r, slot, :] = 0.0
-    Ginv[r, :, slot] = 0.0
-
-
-def _grow(arrays3, arrays2, k_new):
-    out3 = []
-    for A in arrays3:
-        B = np.zeros((A.shape[0], k_new, k_new), dtype=A.dtype)
-        B[:, : A.shape[1], : A.shape[2]] = A
-        out3.append(B)
-    out2 = []
-    for A, fill in arrays2:
-        B = np.full((A.shape[0], k_new), fill, dtype=A.dtype)
-        B[:, : A.shape[1]] = A
-        out2.append(B)
-    return out3, out2
-
-
 # --------------------------------------------------------------------------------------------
-# lasso: batched homotopy
-
-
-def _lasso_homotopy(B, lam, op, exact=False, max_steps=None, resync=16):
-    """Solve ``min 0.5 a^T G_r a - b_r^T a + lam_r ||a||_1`` for every row r (homotopy).
-
-    Parameters
-    ----------
-    B : ndarray of shape (n, d), float64
-        Correlations ``D_m x`` (masked data).
-    lam : ndarray of shape (n,)
-        Per-row penalty.
-    op : _SharedGram or _MaskedGram
-    exact : bool
-        Keep the correlations and run the large products in float64 too.
-    max_steps : int, optional
-        Step limit per row (default ``8 d``).
-    resync : int
-        Recompute the correlations exactly every ``resync`` steps (float32 mode).
-
-    Returns
-    -------
-    A : ndarray of shape (n, d), float64
-    ok : ndarray of shape (n,), bool
-        False where the path did not finish within the step limit.
-    """
-    n, d = B.shape
-    out = np.zeros((n, d))
-    ok = np.ones(n, dtype=bool)
-    if n == 0:
-        return out, ok
-    if max_steps is None:
-        max_steps = 8 * d
-    fdt = np.float64 if exact else np.float32
-    absB = np.abs(B)
-    j0 = np.argmax(absB, axis=1)
-    lam0 = absB[np.arange(n), j0]
-    rows = np.flatnonzero(lam0 > lam)
-    if rows.size == 0:
-        return out, ok
-
-    k = 8
-    r = rows.size
-    rr = np.arange(r)
-    c = B[rows].astype(fdt)
-    lamc = lam0[rows].copy()
-    lamt = np.asarray(lam, dtype=np.float64)[rows]
-    slots = np.full((r, k), -1, dtype=np.int64)
-    sgn = np.zeros((r, k))
-    coef = np.zeros((r, k))
-    Ginv = np.zeros((r, k, k))
-    sub = op.subset(rows)
-    j = j0[rows]
-    slots[:, 0] = j
-    sgn[:, 0] = np.sign(B[rows, j])
-    Ginv[:, 0, 0] = 1.0 / sub.gram_diag(j)
-    nact = np.ones(r, dtype=np.int64)
-    isact = np.zeros((r, d), dtype=fdt)  # +inf on active atoms, 0 elsewhere
-    isact[rr, j] = np.inf
-    last_drop = np.full(r, -1, dtype=np.int64)
-    live = np.ones(r, dtype=bool)
-
-    def dense(values, dtype):
-        return _scatter(slots, values, d, dtype)
-
-    shared = isinstance(op, _SharedGram)
-
-    def finish(sel):
-        """Exact coefficients of finished rows on their active sets, stored in ``out``.
-
-        On the active set ``a_A = G_AA^{-1} (b_A - lam s_A)``; the bordered inverse is exact
-        for a shared Gram matrix, and refined once with exact products for per-row masks.
-        """
-        idx = np.flatnonzero(sel)
-        sl = slots[idx]
-        Bi = B[rows[idx]]
-        on = sl >= 0
-        rhs = np.where(on, np.take_along_axis(Bi, np.maximum(sl, 0), axis=1), 0.0)
-        rhs -= lamt[idx, None] * sgn[idx]
-        Gi = Ginv[idx]
-        cf = np.matmul(Gi, rhs[:, :, None])[:, :, 0]
-        if not shared:
-            W = _scatter(sl, cf, d)
-            cc = Bi - sub.subset(idx).apply(W, exact=True)
-            cs = np.take_along_axis(cc, np.maximum(sl, 0), axis=1)
-            res = np.where(on, cs - lamt[idx, None] * sgn[idx], 0.0)
-            cf += np.matmul(Gi, res[:, :, None])[:, :, 0]
-        coef[idx] = cf
-        out[rows[idx]] = _scatter(sl, cf, d)
-
-    tiny = np.asarray(1e-30, dtype=fdt)
-    for step in range(max_steps):
-        if not live.all():
-            if not live.any():
-                break
-            if (~live).sum() > 0.1 * r:  # compact
-                keep = np.flatnonzero(live)
-                rows, c, lamc, lamt = rows[keep], c[keep], lamc[keep], lamt[keep]
-                slots, sgn, coef, Ginv = slots[keep], sgn[keep], coef[keep], Ginv[keep]
-                nact, isact, last_drop = nact[keep], isact[keep], last_drop[keep]
-                sub = sub.subset(keep)
-                r = rows.size
-                rr = np.arange(r)
-                live = np.ones(r, dtype=bool)
-        if not exact and step % resync == resync - 1:
-            c = (B[rows] - sub.apply(dense(coef, np.float64), exact=True)).astype(fdt)
-        u = np.matmul(Ginv, sgn[:, :, None])[:, :, 0]
-        u[~live] = 0.0
-        e = sub.apply(dense(u, fdt), exact=exact).astype(fdt, copy=False)
-        lam_col = lamc.astype(fdt)[:, None]
-        # entering step: (lam -+ c) / (1 -+ e), numerators clamped at 0, only positive dens
-        num = lam_col - c
-        np.maximum(num, 0, out=num)
-        den = 1 - e
-        np.maximum(den, tiny, out=den)
-        g_in = num / den
-        np.add(lam_col, c, out=num)
-        np.maximum(num, 0, out=num)
-        np.add(1, e, out=den)
-        np.maximum(den, tiny, out=den)
-        np.divide(num, den, out=num)
-        np.minimum(g_in, num, out=g_in)
-        g_in += isact
-        has_ld = last_drop >= 0
-        g_in[rr[has_ld], last_drop[has_ld]] = np.inf
-        j_in = np.argmin(g_in, axis=1)
-        gam_in = g_in[rr, j_in].astype(np.float64)
-        # leaving step
-        with np.errstate(divide="ignore", invalid="ignore"):
-            gd = -coef / u
-        gd[~((slots >= 0) & (gd > 0))] = np.inf
-        q_out = np.argmin(gd, axis=1)
-        gam_out = gd[rr, q_out]
-        gam_end = lamc - lamt
-        gam = np.minimum(np.minimum(gam_in, gam_out), gam_end)
-        gam[~live] = 0.0
-        coef += gam[:, None] * u
-        c -= gam.astype(fdt)[:, None] * e
-        lamc -= gam
-        ends = live & (gam_end <= np.minimum(gam_in, gam_out))
-        drops = live & ~ends & (gam_out < gam_in)
-        adds = live & ~ends & ~drops
-        last_drop[:] = -1
-        if ends.any():
-            lamc[ends] = lamt[ends]
-            finish(ends)
-            live &= ~ends
-        if drops.any():
-            di = np.flatnonzero(drops)
-            q = q_out[di]
-            jd = slots[di, q]
-            isact[di, jd] = 0.0
-            last_drop[di] = jd
-            coef[di, q] = 0.0
-            sgn[di, q] = 0.0
-            slots[di, q] = -1
-            nact[di] -= 1
-            G_sub = Ginv[di]
-            _border_drop(G_sub, q)
-            Ginv[di] = G_sub
-        if adds.any():
-            ai = np.flatnonzero(adds)
-            if nact[ai].max() >= k:
-                k_new = k + 8
-                (Ginv,), (slots, sgn, coef) = _grow(
-                    [Ginv], [(slots, -1), (sgn, 0.0), (coef, 0.0)], k_new
-                )
-                k = k_new
-            slot = np.argmax(slots[ai] < 0, axis=1)
-            jn = j_in[ai]
-            col = sub.subset(ai).columns(jn)  # (na, d) float64
-            g = np.zeros((r, k))
-            ga = np.take_along_axis(col, np.maximum(slots[ai], 0), axis=1)
-            ga[slots[ai] < 0] = 0.0
-            g[ai] = ga
-            v = np.matmul(Ginv, g[:, :, None])[:, :, 0]
-            diag = col[np.arange(ai.size), jn]
-            sigma = np.ones(r)
-            sigma[ai] = diag - np.einsum("rk,rk->r", ga, v[ai])
-            bad = np.zeros(r, dtype=bool)
-            bad[ai] = sigma[ai] <= 1e-10 * np.maximum(diag, _TINY)
-            sigma[bad] = 1.0
-            v[bad] = 0.0
-            Ginv += v[:, :, None] * (v / sigma[:, None])[:, None, :]
-            # an atom in the span of the active ones (e.g. a repeated atom) cannot join: it
-            # stays at 0 on the boundary, excluded for this row (as LARS drops it for good)
-            isact[ai, jn] = np.inf
-            good = ~bad[ai]
-            ai, slot, jn = ai[good], slot[good], jn[good]
-            vs = -v[ai] / sigma[ai, None]
-            Ginv[ai, slot, :] = vs
-            Ginv[ai, :, slot] = vs
-            Ginv[ai, slot, slot] = 1.0 / sigma[ai]
-            slots[ai, slot] = jn
-            sgn[ai, slot] = np.sign(c[ai, jn])
-            coef[ai, slot] = 0.0
-            nact[ai] += 1
-    else:
-        ok[rows[live]] = False
-    return out, ok
+# lasso: compiled homotopy (dlsr._homotopy) with snapshots at every requested penalty
 
 
 def lasso_objective(X, D, A, lam, mask=None):
@@ -451,17 +219,6 @@ def lasso_objective(X, D, A, lam, mask=None):
         R = R * mask
         scale = mask.sum(axis=1) / X.shape[1]
     return 0.5 * np.einsum("ij,ij->i", R, R) + lam * scale * np.abs(A).sum(axis=1)
-
-
-def _kkt_ok(B, A, op, lam, rtol=1e-9):
-    """Lasso optimality on rows: |c_j| <= lam off the support, c_j = lam sign(a_j) on it."""
-    C = B - op.apply(A, exact=True)
-    lam_col = lam[:, None]
-    on = A != 0
-    atol = rtol * np.maximum(lam_col, 1.0)
-    off_ok = np.where(on, True, np.abs(C) <= lam_col + atol)
-    on_ok = np.where(on, np.abs(C - lam_col * np.sign(A)) <= atol, True)
-    return off_ok.all(axis=1) & on_ok.all(axis=1)
 
 
 def _group_by_mask(M, min_group):
@@ -493,16 +250,19 @@ def _n_workers(n_jobs):
     return n_jobs
 
 
-def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None):
+def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None, n_paths=None,
+                  dtype=np.float64):
     """Run ``solver(rows, op)`` over chunks of rows sharing a Gram operator.
 
     Rows sharing one mask (at least ``min_group`` of them) get that mask's Gram matrix; the rest
-    get per-row masked products. With ``n_jobs > 1`` chunks run in threads (numpy releases the
-    GIL) with single-threaded BLAS in each.
+    get per-row masked products. With ``n_jobs > 1`` chunks run in threads (numpy and the
+    compiled kernels release the GIL) with single-threaded BLAS in each. ``solver`` returns
+    ``(r, d)`` codes, or ``(n_paths, r, d)`` when ``n_paths`` is given.
     """
     n, _ = X.shape
     d = D.shape[0]
-    out = np.zeros((n, d), dtype=np.float64)
+    shape = (n, d) if n_paths is None else (n_paths, n, d)
+    out = np.zeros(shape, dtype=dtype)
     D64 = np.asarray(D, dtype=np.float64)
     if mask is None:
         groups, rest = [np.arange(n)], np.zeros(0, dtype=np.int64)
@@ -524,7 +284,10 @@ def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None):
 
     def run(task):
         idx, op = task
-        out[idx] = solver(idx, op)
+        if n_paths is None:
+            out[idx] = solver(idx, op)
+        else:
+            out[:, idx] = solver(idx, op)
 
     workers = min(_n_workers(n_jobs), max(len(tasks), 1))
     with threadpool_limits(limits=1):  # small products: threaded BLAS only adds overhead
@@ -537,6 +300,101 @@ def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None):
     return out
 
 
+def _check_lams(lam, name="lam"):
+    lams = np.atleast_1d(np.asarray(lam, dtype=np.float64))
+    if lams.ndim != 1 or lams.size == 0:
+        raise ValueError(f"{name} must be a number or a non-empty 1-D sequence, got {lam!r}")
+    if not np.all(np.isfinite(lams)) or np.any(lams < 0):
+        raise ValueError(f"{name} must be finite numbers >= 0, got {lam!r}")
+    return lams
+
+
+def lasso_path(
+    X, D, lams, mask=None, *, n_jobs=None, chunk_size=1024, min_group=256, dtype=np.float32,
+    max_steps=None,
+):
+    """Lasso codes of every row of ``X`` for several penalties, from one homotopy path.
+
+    The homotopy (LARS-lasso) starts from ``a = 0`` at ``lam_max = max_j |d_j^T x|`` and follows
+    the exact piecewise-linear path of solutions down to the smallest requested penalty; each
+    requested penalty is recorded as the path crosses it. A grid of penalties therefore costs
+    about as much as its smallest member. Every recorded solution is checked against the lasso
+    optimality conditions; a row that fails (degenerate ties) is solved again per penalty by
+    scikit-learn's LARS (:func:`lasso_rowwise`).
+
+    Parameters
+    ----------
+    X : array-like of shape (n, p)
+    D : array-like of shape (d, p)
+        Atoms as rows (need not be unit norm).
+    lams : float or sequence of float
+        Penalties, >= 0, in any order (duplicates allowed).
+    mask : array-like of shape (n, p), bool, optional
+        True where an entry of ``X`` is valid; the penalty of a row is scaled by
+        ``||m||_0 / p`` (the reference implementation's masked lasso).
+    n_jobs : int, optional
+        Worker threads over chunks (None: one; -1: all cores).
+    chunk_size : int
+        Rows per task.
+    min_group : int
+        Rows sharing one mask are solved with that mask's Gram matrix when at least this many;
+        the others compute the masked Gram column of each entering atom.
+    dtype : numpy dtype
+        Output dtype (the path is computed in float64).
+    max_steps : int, optional
+        Homotopy steps per row before it is handed to the fallback (default ``8 d``).
+
+    Returns
+    -------
+    A : ndarray of shape (len(lams), n, d)
+        ``A[t]`` solves the problem with penalty ``lams[t]``.
+    """
+    from dlsr._homotopy import lasso_path_rows
+
+    X, D, mask = _check_xd(X, D, mask)
+    lams = _check_lams(lams, "lams")
+    n, p = X.shape
+    d = D.shape[0]
+    levels, where = np.unique(lams, return_inverse=True)
+    levels = levels[::-1].copy()  # the path runs from large to small penalties
+    where = levels.size - 1 - where.ravel()
+    if max_steps is None:
+        max_steps = 8 * d
+    X64 = np.asarray(X, dtype=np.float64)
+    D64 = np.ascontiguousarray(D, dtype=np.float64)
+    if mask is not None:
+        Xm = X64 * mask
+        scale = mask.sum(axis=1) / p
+    else:
+        Xm = X64
+        scale = np.ones(n)
+    Dt = np.ascontiguousarray(D64.T)
+    G_full = D64 @ D64.T if mask is not None else None
+    no_M = np.zeros((1, 1))
+
+    def solver(idx, op):
+        B = np.ascontiguousarray(Xm[idx] @ D64.T)
+        L = np.ascontiguousarray(scale[idx, None] * levels[None, :])
+        A = np.zeros((levels.size, idx.size, d))
+        ok = np.ones(idx.size, dtype=bool)
+        if isinstance(op, _SharedGram):
+            lasso_path_rows(B, L, op.G64, Dt, no_M, False, A, ok, max_steps, 1e-9)
+        else:
+            M = np.ascontiguousarray(op.M, dtype=np.float64)
+            lasso_path_rows(B, L, G_full, Dt, M, True, A, ok, max_steps, 1e-9)
+        if not ok.all():  # rare degenerate rows: scikit-learn's LARS per row and penalty
+            bad = np.flatnonzero(~ok)
+            rows = idx[bad]
+            for t, lam_t in enumerate(levels):
+                A[t, bad] = lasso_rowwise(
+                    X64[rows], D64, lam_t, None if mask is None else mask[rows])
+        return A
+
+    A = _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
+                      n_paths=levels.size, dtype=dtype)
+    return A[where]
+
+
 def lasso(
     X, D, lam, mask=None, *, n_jobs=None, chunk_size=1024, min_group=256, dtype=np.float32
 ):
@@ -544,8 +402,8 @@ def lasso(
 
     Solves ``min_a 0.5 ||x - D^T a||^2 + lam ||a||_1`` per row, or with a mask
     ``min_a 0.5 ||m * (x - D^T a)||^2 + lam (||m||_0 / p) ||a||_1`` (the reference
-    implementation's masked lasso). Exact up to floating point (homotopy; see the module
-    docstring); the same problem as ``sklearn.decomposition.sparse_encode(X, D,
+    implementation's masked lasso). Exact up to floating point (homotopy, see
+    :func:`lasso_path`); the same problem as ``sklearn.decomposition.sparse_encode(X, D,
     algorithm="lasso_lars", alpha=lam)``.
 
     Parameters
@@ -558,48 +416,23 @@ def lasso(
     mask : array-like of shape (n, p), bool, optional
         True where an entry of ``X`` is valid.
     n_jobs : int, optional
-        Worker threads over chunks (None: one, with the BLAS threads as configured; -1: all
-        cores).
+        Worker threads over chunks (None: one; -1: all cores).
     chunk_size : int
-        Rows solved together (bounds memory; small chunks stay in cache).
+        Rows per task.
     min_group : int
         Rows sharing one mask are solved with that mask's Gram matrix when at least this many.
     dtype : numpy dtype
-        Output dtype (the solve itself runs in float64 / float32 as described above).
+        Output dtype (the solve runs in float64).
 
     Returns
     -------
     A : ndarray of shape (n, d)
     """
-    X, D, mask = _check_xd(X, D, mask)
-    if not np.isfinite(lam) or lam < 0:
-        raise ValueError(f"lam must be a finite number >= 0, got {lam}")
-    p = X.shape[1]
-    X64 = np.asarray(X, dtype=np.float64)
-    D64 = np.asarray(D, dtype=np.float64)
-    if mask is not None:
-        Xm = X64 * mask
-        lam_rows = lam * mask.sum(axis=1) / p
-    else:
-        Xm = X64
-        lam_rows = np.full(X.shape[0], float(lam))
-
-    def solver(idx, op):
-        B = Xm[idx] @ D64.T
-        A, ok = _lasso_homotopy(B, lam_rows[idx], op)
-        ok &= _kkt_ok(B, A, op, lam_rows[idx])
-        if not np.all(ok):  # rare: float32 path decisions near a tie; redo in float64
-            bad = np.flatnonzero(~ok)
-            A2, ok2 = _lasso_homotopy(B[bad], lam_rows[idx][bad], op.subset(bad), exact=True)
-            ok2 &= _kkt_ok(B[bad], A2, op.subset(bad), lam_rows[idx][bad])
-            A[bad] = A2
-            if not np.all(ok2):  # degenerate (e.g. repeated atoms): scikit-learn per row
-                worst = idx[bad[~ok2]]
-                A[bad[~ok2]] = lasso_rowwise(
-                    X64[worst], D64, lam, None if mask is None else mask[worst])
-        return A
-
-    return _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs).astype(dtype)
+    if np.ndim(lam) != 0:
+        raise ValueError(f"lam must be a single number (use lasso_path for several), got {lam!r}")
+    _check_lams(lam)
+    return lasso_path(X, D, [lam], mask, n_jobs=n_jobs, chunk_size=chunk_size,
+                      min_group=min_group, dtype=dtype)[0]
 
 
 def lasso_rowwise(X, D, lam, mask=None):
@@ -674,20 +507,27 @@ def omp_rowwise(X, D, n_nonzero, mask=None):
 # OMP: batched, one atom per step for every row
 
 
-def _omp_batch(B, n_nonzero, op, refine):
-    """OMP on Gram operators: ``B`` (r, d) correlations, returns (r, d) float64 codes."""
+def _omp_batch(B, stops, op, refine):
+    """OMP on Gram operators with snapshots.
+
+    ``B`` (r, d) correlations; ``stops`` increasing numbers of atoms. Returns
+    (len(stops), r, d) float64 codes: OMP's greedy selection does not depend on the final
+    number of atoms, so the solution with ``L`` atoms is the least-squares fit on the first
+    ``L`` atoms selected by any longer run.
+    """
     r, d = B.shape
-    out = np.zeros((r, d))
-    if r == 0 or n_nonzero == 0:
+    stops = [min(int(s), d) for s in stops]
+    out = np.zeros((len(stops), r, d))
+    if r == 0:
         return out
     rr = np.arange(r)
-    if n_nonzero == 1:
+    if stops[-1] == 1:
         j = np.argmax(np.abs(B), axis=1)
         diag = op.gram_diag(j)
         good = (B[rr, j] ** 2 > _TINY) & (diag > _TINY)
-        out[rr[good], j[good]] = B[rr[good], j[good]] / diag[good]
+        out[:, rr[good], j[good]] = B[rr[good], j[good]] / diag[good]
         return out
-    L = min(int(n_nonzero), d)
+    L = stops[-1]
     slots = np.full((r, L), -1, dtype=np.int64)
     Ginv = np.zeros((r, L, L))
     cols = np.zeros((r, L, d), dtype=np.float32)
@@ -696,6 +536,19 @@ def _omp_batch(B, n_nonzero, op, refine):
     B32 = B.astype(np.float32)
     c = B32.copy()
     rc = rr[:, None]
+
+    def snapshot(t1):
+        """Codes on the first ``t1`` selected atoms (refined with exact products if asked)."""
+        sl = slots[:, :t1]
+        cf = coef[:, :t1].copy()
+        if refine:
+            Gi = Ginv[:, :t1, :t1]
+            for _ in range(2):
+                res = B - op.apply(_scatter(sl, cf, d), exact=True)
+                resA = np.where(sl >= 0, res[rc, np.maximum(sl, 0)], 0.0)
+                cf += np.matmul(Gi, resA[:, :, None])[:, :, 0]
+        return _scatter(sl, cf, d)
+
     for t in range(L):
         cabs = np.abs(c)
         if t:
@@ -727,16 +580,59 @@ def _omp_batch(B, n_nonzero, op, refine):
         cols[:, t] = col
         BA = np.where(slots[:, : t + 1] >= 0, B[rc, np.maximum(slots[:, : t + 1], 0)], 0.0)
         coef[:, : t + 1] = np.matmul(Ginv[:, : t + 1, : t + 1], BA[:, :, None])[:, :, 0]
+        for s_i, stop in enumerate(stops):
+            if stop == t + 1:
+                out[s_i] = snapshot(t + 1)
         if t + 1 < L:
             fit = np.einsum("rk,rkd->rd", coef[:, : t + 1].astype(np.float32), cols[:, : t + 1])
             np.subtract(B32, fit, out=c)
-    if refine:
-        for _ in range(2):
-            W = _scatter(slots, coef, d)
-            res = B - op.apply(W, exact=True)
-            resA = np.where(slots >= 0, res[rc, np.maximum(slots, 0)], 0.0)
-            coef += np.matmul(Ginv, resA[:, :, None])[:, :, 0]
-    return _scatter(slots, coef, d)
+    else:
+        return out
+    for s_i, stop in enumerate(stops):  # every row stopped early: later stops are the same
+        if stop > t:
+            out[s_i] = snapshot(t)
+    return out
+
+
+def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_group=256,
+             dtype=np.float32):
+    """OMP codes for several numbers of atoms from one greedy run.
+
+    OMP's selection does not depend on the final number of atoms, so one run to the largest
+    ``L`` gives every smaller one (the least-squares fit on the first ``L`` selected atoms).
+
+    Parameters
+    ----------
+    X : array-like of shape (n, p)
+    D : array-like of shape (d, p)
+    n_nonzeros : int or sequence of int
+        Numbers of atoms, >= 1, in any order.
+    mask : array-like of shape (n, p), bool, optional
+    n_jobs, chunk_size, min_group, dtype
+        As in :func:`lasso_path`.
+
+    Returns
+    -------
+    A : ndarray of shape (len(n_nonzeros), n, d)
+    """
+    X, D, mask = _check_xd(X, D, mask)
+    Ls = np.atleast_1d(np.asarray(n_nonzeros))
+    if (Ls.ndim != 1 or Ls.size == 0 or not np.issubdtype(Ls.dtype, np.number)
+            or np.any(Ls != np.round(Ls)) or np.any(Ls < 1)):
+        raise ValueError(f"n_nonzero must be positive integers, got {n_nonzeros!r}")
+    stops, where = np.unique(Ls.astype(np.int64), return_inverse=True)
+    X64 = np.asarray(X, dtype=np.float64)
+    D64 = np.asarray(D, dtype=np.float64)
+    D64t = np.ascontiguousarray(D64.T)
+    Xm = X64 * mask if mask is not None else X64
+
+    def solver(idx, op):
+        B = Xm[idx] @ D64t
+        return _omp_batch(B, stops.tolist(), op, refine=isinstance(op, _MaskedGram))
+
+    A = _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
+                      n_paths=stops.size, dtype=dtype)
+    return A[where.ravel()]
 
 
 def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=256,
@@ -767,19 +663,11 @@ def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=2
     -------
     A : ndarray of shape (n, d)
     """
-    X, D, mask = _check_xd(X, D, mask)
-    if int(n_nonzero) != n_nonzero or n_nonzero < 1:
-        raise ValueError(f"n_nonzero must be a positive integer, got {n_nonzero}")
-    X64 = np.asarray(X, dtype=np.float64)
-    D64 = np.asarray(D, dtype=np.float64)
-    D64t = np.ascontiguousarray(D64.T)
-    Xm = X64 * mask if mask is not None else X64
-
-    def solver(idx, op):
-        B = Xm[idx] @ D64t
-        return _omp_batch(B, int(n_nonzero), op, refine=isinstance(op, _MaskedGram))
-
-    return _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs).astype(dtype)
+    if np.ndim(n_nonzero) != 0:
+        raise ValueError(f"n_nonzero must be one integer (use omp_path for several), "
+                         f"got {n_nonzero!r}")
+    return omp_path(X, D, [n_nonzero], mask, n_jobs=n_jobs, chunk_size=chunk_size,
+                    min_group=min_group, dtype=dtype)[0]
 
 
 # --------------------------------------------------------------------------------------------

@@ -32,7 +32,9 @@ __all__ = [
     "Representation",
     "fit_representation",
     "encode_patches",
+    "encode_patches_grid",
     "rectangle_features",
+    "rectangle_features_grid",
     "DLSRFeatures",
 ]
 
@@ -242,6 +244,53 @@ def fit_representation(
     return Representation(learner, np.asarray(D, np.float32), centroids, mean, P, natural_param)
 
 
+def encode_patches_grid(X, M, rep: Representation, encoder: str, params,
+                        polarity: bool = True) -> list[np.ndarray]:
+    """Encode preprocessed patches for several values of the encoder's parameter.
+
+    One homotopy path gives every lasso penalty (:func:`dlsr.coding.lasso_path`) and one OMP
+    run every number of atoms (:func:`dlsr.coding.omp_path`), so a grid costs about as much as
+    its most expensive member.
+
+    Parameters
+    ----------
+    X : ndarray of shape (m, 288)
+        Standardised (and whitened) patches, masked entries 0.
+    M : ndarray of shape (m, 288), bool
+    rep : Representation
+    encoder : {"SC", "mSC", "OMP", "mOMP", "ST", "Natural"}
+    params : sequence
+        lambdas for SC/mSC/ST, numbers of non-zeros for OMP/mOMP; Natural ignores them (its
+        parameter is the dictionary's) and returns the same array for each.
+    polarity : bool
+        Polarity splitting ``[max(a, 0), max(-a, 0)]`` (never for NKM-Natural).
+
+    Returns
+    -------
+    list of ndarray of shape (m, k), one per parameter
+        ``k = 2 * n_atoms`` with polarity splitting, else ``n_atoms``.
+    """
+    D = rep.dictionary
+    params = list(params)
+    if encoder == "SC":
+        codes = coding.lasso_path(X, D, params)
+    elif encoder == "mSC":
+        codes = coding.lasso_path(X, D, params, mask=M)
+    elif encoder == "OMP":
+        codes = coding.omp_path(X, D, [int(v) for v in params])
+    elif encoder == "mOMP":
+        codes = coding.omp_path(X, D, [int(v) for v in params], mask=M)
+    elif encoder == "ST":
+        codes = [coding.soft_threshold(X, D, v) for v in params]
+    elif encoder == "Natural":
+        A = coding.natural_encode(X, M, rep.learner, D, centroids=rep.centroids,
+                                  param=rep.natural_param, polarity=polarity)
+        return [A] * len(params)
+    else:
+        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
+    return [coding.polarity_split(A) if polarity else A for A in codes]
+
+
 def encode_patches(X, M, rep: Representation, encoder: str, param=None, polarity: bool = True):
     """Encode preprocessed patches.
 
@@ -262,23 +311,60 @@ def encode_patches(X, M, rep: Representation, encoder: str, param=None, polarity
     ndarray of shape (m, k)
         ``k = 2 * n_atoms`` with polarity splitting, else ``n_atoms``.
     """
-    D = rep.dictionary
-    if encoder == "SC":
-        A = coding.lasso(X, D, param)
-    elif encoder == "mSC":
-        A = coding.lasso(X, D, param, mask=M)
-    elif encoder == "OMP":
-        A = coding.omp(X, D, int(param))
-    elif encoder == "mOMP":
-        A = coding.omp(X, D, int(param), mask=M)
-    elif encoder == "ST":
-        A = coding.soft_threshold(X, D, param)
-    elif encoder == "Natural":
-        return coding.natural_encode(X, M, rep.learner, D, centroids=rep.centroids,
-                                     param=rep.natural_param, polarity=polarity)
-    else:
-        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
-    return coding.polarity_split(A) if polarity else A
+    return encode_patches_grid(X, M, rep, encoder, [param], polarity)[0]
+
+
+def rectangle_features_grid(
+    images,
+    masks,
+    rep: Representation,
+    encoder: str,
+    params,
+    polarity: bool = True,
+    chunk_size: int = 64,
+) -> list[np.ndarray]:
+    """Features of many rectangles for several encoder parameters, streamed in chunks.
+
+    Patches are extracted, standardised and whitened once per chunk and encoded for every
+    parameter (:func:`encode_patches_grid`).
+
+    Parameters
+    ----------
+    images, masks : ndarray of shape (n, 24, 24, 8)
+    rep : Representation
+    encoder, polarity : see :func:`encode_patches`
+    params : sequence
+        Encoder parameters (see :func:`encode_patches_grid`).
+    chunk_size : int
+        Rectangles encoded at once (each is 361 patches).
+
+    Returns
+    -------
+    list of ndarray of shape (n, 4 * k), float32, one per parameter
+    """
+    images = np.asarray(images, dtype=np.float32)
+    masks = np.asarray(masks, dtype=bool)
+    params = list(params)
+    n = len(images)
+    if n == 0:
+        raise ValueError("no rectangles to featurise")
+    if not params:
+        raise ValueError("params must hold at least one encoder parameter")
+    out = None
+    for start in range(0, n, chunk_size):
+        P, PM = patches.extract_patches(images[start:start + chunk_size],
+                                        masks[start:start + chunk_size], PATCH_SIZE)
+        b, g, p = P.shape
+        Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
+                                 (rep.zca_mean, rep.zca_matrix))
+        codes = encode_patches_grid(Xp, PM.reshape(b * g, p), rep, encoder, params, polarity)
+        side = int(round(np.sqrt(g)))
+        for t, A in enumerate(codes):
+            pooled = quadrant_pool(A.reshape(b, side, side, -1))
+            if out is None:
+                out = [np.empty((n, pooled.shape[1]), dtype=np.float32) for _ in params]
+            out[t][start:start + b] = pooled
+    return out
 
 
 def rectangle_features(
@@ -304,25 +390,8 @@ def rectangle_features(
     -------
     ndarray of shape (n, 4 * k), float32
     """
-    images = np.asarray(images, dtype=np.float32)
-    masks = np.asarray(masks, dtype=bool)
-    n = len(images)
-    out = None
-    for start in range(0, n, chunk_size):
-        P, PM = patches.extract_patches(images[start:start + chunk_size],
-                                        masks[start:start + chunk_size], PATCH_SIZE)
-        b, g, p = P.shape
-        Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
-                                 (rep.zca_mean, rep.zca_matrix))
-        A = encode_patches(Xp, PM.reshape(b * g, p), rep, encoder, param, polarity)
-        side = int(round(np.sqrt(g)))
-        pooled = quadrant_pool(A.reshape(b, side, side, -1))
-        if out is None:
-            out = np.empty((n, pooled.shape[1]), dtype=np.float32)
-        out[start:start + b] = pooled
-    if out is None:
-        raise ValueError("no rectangles to featurise")
-    return out
+    return rectangle_features_grid(images, masks, rep, encoder, [param], polarity,
+                                   chunk_size)[0]
 
 
 class DLSRFeatures(TransformerMixin, BaseEstimator):

@@ -14,8 +14,11 @@ from dlsr.coding import (
     kmeans_triangle,
     lasso,
     lasso_objective,
+    lasso_path,
+    lasso_rowwise,
     natural_encoder,
     omp,
+    omp_path,
     polarity_split,
     soft_threshold,
 )
@@ -186,6 +189,43 @@ def test_lasso_repeated_atoms(random_problem):
                                rtol=1e-9)
 
 
+@pytest.mark.parametrize("masked", [False, True])
+def test_lasso_path_equals_separate_solves(real_patches, masked):
+    X, M, D = real_patches
+    X, M = X[:150], (M[:150] if masked else None)
+    lams = [2.0, 0.5, 1.0, 1.0, 1.5]  # any order, duplicates allowed
+    P = lasso_path(X, D, lams, mask=M, min_group=10**9, dtype=np.float64)
+    assert P.shape == (len(lams), len(X), D.shape[0])
+    for t, lam in enumerate(lams):
+        ref = sparse_encode(X, D, algorithm="lasso_lars", alpha=lam) if not masked else None
+        A = lasso(X, D, lam, mask=M, min_group=10**9, dtype=np.float64)
+        np.testing.assert_allclose(P[t], A, atol=1e-9)
+        if ref is not None:
+            assert _rel_obj_gap(X, D, P[t], ref, lam) < 1e-6
+    # a smaller penalty keeps more atoms on this path
+    nnz = [(P[lams.index(v)] != 0).sum() for v in (2.0, 1.5, 1.0, 0.5)]
+    assert nnz == sorted(nnz) and nnz[0] < nnz[-1]
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_lasso_path_rows_over_the_step_limit_fall_back_to_lars(real_patches):
+    X, M, D = real_patches
+    X, M = X[:30], M[:30]
+    A = lasso_path(X, D, [1.0, 2.0], mask=M, max_steps=3, dtype=np.float64)
+    for t, lam in enumerate([1.0, 2.0]):
+        R = lasso_rowwise(X, D, lam, M)
+        assert _rel_obj_gap(X, D, A[t], R, lam, M) < 1e-6
+
+
+def test_lasso_path_validates(random_problem):
+    X, D, _ = random_problem
+    for bad in ([], [0.5, -1.0], [[0.5]], [np.nan]):
+        with pytest.raises(ValueError, match="lams"):
+            lasso_path(X, D, bad)
+    with pytest.raises(ValueError, match="lasso_path"):
+        lasso(X, D, [0.5, 1.0])
+
+
 def test_lasso_does_not_mutate_and_validates(random_problem):
     X, D, M = random_problem
     Xc, Dc, Mc = X.copy(), D.copy(), M.copy()
@@ -263,10 +303,26 @@ def test_omp_masked_real_exact_least_squares(real_patches):
     assert np.abs(C[on]).max() < 1e-3 * np.abs(X).max()
 
 
+@pytest.mark.parametrize("masked", [False, True])
+def test_omp_path_equals_separate_runs(real_patches, masked):
+    X, M, D = real_patches
+    X, M = X[:200], (M[:200] if masked else None)
+    Ls = [10, 1, 5, 15, 5]
+    P = omp_path(X, D, Ls, mask=M, min_group=10**9, dtype=np.float64)
+    assert P.shape == (len(Ls), len(X), D.shape[0])
+    for t, L in enumerate(Ls):
+        A = omp(X, D, L, mask=M, min_group=10**9, dtype=np.float64)
+        np.testing.assert_allclose(P[t], A, atol=1e-9)
+        assert np.all((P[t] != 0).sum(axis=1) <= L)
+    if not masked:  # and scikit-learn's OMP with that many atoms
+        np.testing.assert_allclose(P[2], _sk_omp(X, D, 5), atol=1e-5, rtol=1e-4)
+
+
 def test_omp_validates(random_problem):
     X, D, _ = random_problem
-    with pytest.raises(ValueError, match="n_nonzero"):
-        omp(X, D, 0)
+    for bad in (0, [5, 0], [], [1.5]):
+        with pytest.raises(ValueError, match="n_nonzero"):
+            omp_path(X, D, bad) if np.ndim(bad) else omp(X, D, bad)
 
 
 # ---------------------------------------------------------------------------------------------
