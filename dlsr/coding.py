@@ -36,8 +36,8 @@ per-row masks). The greedy selection does not depend on the final number of atom
 gives every smaller ``L`` of a grid (:func:`omp_path`).
 
 Chunks of rows (``chunk_size``, small enough to stay in cache) run in ``n_jobs`` threads with
-single-threaded BLAS (numpy and the compiled kernel release the GIL); the dense encoders use
-threaded BLAS directly.
+single-threaded BLAS (numpy and the compiled kernel release the GIL); the dense encoders split
+their chunks over as many threads as BLAS is allowed to use.
 Results do not depend on the number of threads.
 
 Masked OMP: exact masked least squares
@@ -87,7 +87,7 @@ _TINY = np.finfo(np.float64).tiny
 # validation helpers
 
 
-def _check_xd(X, D, mask=None, name="X"):
+def _check_xd(X, D, mask=None, name="X", check_finite=True):
     X = np.asarray(X)
     D = np.asarray(D)
     if X.ndim != 2 or D.ndim != 2:
@@ -97,7 +97,7 @@ def _check_xd(X, D, mask=None, name="X"):
             f"{name} has {X.shape[1]} features per row but the dictionary atoms have "
             f"{D.shape[1]}"
         )
-    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(D))):
+    if not np.all(np.isfinite(D)) or (check_finite and not np.all(np.isfinite(X))):
         raise ValueError(f"{name} and D must be finite (no NaN or inf)")
     if mask is not None:
         mask = np.asarray(mask)
@@ -674,10 +674,37 @@ def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=2
 # dense encoders
 
 
+def _blas_threads():
+    from threadpoolctl import threadpool_info
+
+    return max([i.get("num_threads", 1) for i in threadpool_info()
+                if i.get("user_api") == "blas"] or [1])
+
+
 def _dense_chunks(X, n_out, fn, chunk_size, dtype):
-    out = np.empty((X.shape[0], n_out), dtype=dtype)
-    for sl in _chunks(X.shape[0], chunk_size):
-        out[sl] = fn(X[sl])
+    """``fn(x, out)`` over row chunks, in as many threads as BLAS may use (1 BLAS thread each).
+
+    Splitting rows over threads parallelises the element-wise work too, which threaded BLAS
+    alone does not. Non-finite input rows give non-finite outputs (NaN and inf propagate
+    through the products), so finiteness is checked on each chunk's output, in the workers.
+    """
+    n = X.shape[0]
+    out = np.empty((n, n_out), dtype=dtype)
+    slices = list(_chunks(n, chunk_size))
+
+    def run(sl):
+        o = out[sl]
+        fn(X[sl], o)
+        if not np.isfinite(o.sum(dtype=np.float64)) and not np.all(np.isfinite(X[sl])):
+            raise ValueError("X must be finite (no NaN or inf)")
+
+    workers = min(_blas_threads(), len(slices)) if len(slices) > 1 else 1
+    if workers <= 1:
+        for sl in slices:
+            run(sl)
+        return out
+    with threadpool_limits(limits=1), ThreadPoolExecutor(workers) as pool:
+        list(pool.map(run, slices))
     return out
 
 
@@ -700,20 +727,20 @@ def soft_threshold(X, D, lam, *, chunk_size=4096, dtype=np.float32):
     -------
     A : ndarray of shape (n, d)
     """
-    X, D, _ = _check_xd(X, D)
+    X, D, _ = _check_xd(X, D, check_finite=False)  # checked on the outputs, per chunk
     if not np.isfinite(lam) or lam < 0:
         raise ValueError(f"lam must be a finite number >= 0, got {lam}")
     Dt = np.ascontiguousarray(D.T, dtype=dtype)
     lam = dtype(lam) if isinstance(dtype, type) else np.dtype(dtype).type(lam)
 
-    def fn(x):
-        b = np.asarray(x, dtype=Dt.dtype) @ Dt
+    def fn(x, out):
+        np.matmul(np.asarray(x, dtype=Dt.dtype), Dt, out=out)
         if lam == 0:
-            return b
-        t = np.abs(b)
+            return
+        t = np.abs(out)
         t -= lam
         np.maximum(t, 0, out=t)
-        return np.copysign(t, b, out=t)
+        np.copysign(t, out, out=out)
 
     return _dense_chunks(X, D.shape[0], fn, chunk_size, Dt.dtype)
 
@@ -734,21 +761,20 @@ def kmeans_triangle(X, centroids, *, chunk_size=4096, dtype=np.float32):
     -------
     A : ndarray of shape (n, k)
     """
-    X, C, _ = _check_xd(X, centroids)
-    Ct = np.ascontiguousarray(C.T, dtype=dtype)
+    X, C, _ = _check_xd(X, centroids, check_finite=False)  # checked on the outputs
+    Ct = np.ascontiguousarray(C.T, dtype=dtype) * -2  # z = ||x||^2 - 2 x.c + ||c||^2
     cn = np.einsum("kp,kp->k", C, C).astype(Ct.dtype)
 
-    def fn(x):
+    def fn(x, z):
         x = np.asarray(x, dtype=Ct.dtype)
-        z = x @ Ct
-        z *= -2
+        np.matmul(x, Ct, out=z)
         z += cn
         z += np.einsum("np,np->n", x, x)[:, None]
         np.maximum(z, 0, out=z)
         np.sqrt(z, out=z)
         mu = z.mean(axis=1, keepdims=True)
         np.subtract(mu, z, out=z)
-        return np.maximum(z, 0, out=z)
+        np.maximum(z, 0, out=z)
 
     return _dense_chunks(X, C.shape[0], fn, chunk_size, Ct.dtype)
 
