@@ -31,9 +31,9 @@ masked entries' contribution (or the sum over the valid entries when fewer).
 
 OMP is batched over all patches of a chunk (one atom per step for every patch, bordered
 inverses, the Gram columns of the selected atoms kept per patch in float32 for the residual
-correlations; the coefficients are float64 least squares, refined with exact products for
-per-row masks). The greedy selection does not depend on the final number of atoms, so one run
-gives every smaller ``L`` of a grid (:func:`omp_path`).
+correlations; the coefficients are float64 least squares, solved with each row's exact masked
+Gram block for per-row masks). The greedy selection does not depend on the final number of
+atoms, so one run gives every smaller ``L`` of a grid (:func:`omp_path`).
 
 Chunks of rows (``chunk_size``, small enough to stay in cache) run in ``n_jobs`` threads with
 single-threaded BLAS (numpy and the compiled kernel release the GIL); the dense encoders split
@@ -507,7 +507,7 @@ def omp_rowwise(X, D, n_nonzero, mask=None):
 # OMP: batched, one atom per step for every row
 
 
-def _omp_batch(B, stops, op, refine):
+def _omp_batch(B, stops, op, exact_ls):
     """OMP on Gram operators with snapshots.
 
     ``B`` (r, d) correlations; ``stops`` increasing numbers of atoms. Returns
@@ -538,16 +538,21 @@ def _omp_batch(B, stops, op, refine):
     rc = rr[:, None]
 
     def snapshot(t1):
-        """Codes on the first ``t1`` selected atoms (refined with exact products if asked)."""
+        """Codes on the first ``t1`` selected atoms.
+
+        With ``exact_ls`` (per-row masks, whose Gram entries came from float32 columns) the
+        least squares is solved again with the exact float64 masked Gram block of each row.
+        """
         sl = slots[:, :t1]
-        cf = coef[:, :t1].copy()
-        if refine:
-            Gi = Ginv[:, :t1, :t1]
-            for _ in range(2):
-                res = B - op.apply(_scatter(sl, cf, d), exact=True)
-                resA = np.where(sl >= 0, res[rc, np.maximum(sl, 0)], 0.0)
-                cf += np.matmul(Gi, resA[:, :, None])[:, :, 0]
-        return _scatter(sl, cf, d)
+        if not exact_ls or t1 == 0:
+            return _scatter(sl, coef[:, :t1], d)
+        on = sl >= 0
+        Ds = op.D64[np.maximum(sl, 0)] * on[:, :, None]  # (r, t1, p)
+        Gaa = np.matmul(Ds * op.M[:, None, :], Ds.transpose(0, 2, 1))
+        Gaa[~on] = 0.0
+        Gaa += np.eye(t1) * (~on)[:, :, None]  # empty slots: identity rows, zero right side
+        rhs = np.where(on, B[rc, np.maximum(sl, 0)], 0.0)
+        return _scatter(sl, np.linalg.solve(Gaa, rhs[:, :, None])[:, :, 0], d)
 
     for t in range(L):
         cabs = np.abs(c)
@@ -628,7 +633,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
 
     def solver(idx, op):
         B = Xm[idx] @ D64t
-        return _omp_batch(B, stops.tolist(), op, refine=isinstance(op, _MaskedGram))
+        return _omp_batch(B, stops.tolist(), op, exact_ls=isinstance(op, _MaskedGram))
 
     A = _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
                       n_paths=stops.size, dtype=dtype)
