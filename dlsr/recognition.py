@@ -43,7 +43,7 @@ from .features import (
     DLSRFeatures,
     Representation,
     fit_representation,
-    rectangle_features,
+    rectangle_features_grid,
 )
 from .records import read_jsonl
 from .svm import FeatureStandardizer, SquaredHingeSVC
@@ -122,7 +122,8 @@ class RecognitionData:
 
 
 def recognition_data(
-    samples, size: int = 24, negatives_per_image: int | None = None, random_state=0
+    samples, size: int = 24, negatives_per_image: int | None = None, random_state=0,
+    extra_negatives=None,
 ) -> RecognitionData:
     """Rectangle images of every labelled rectangle of ``samples``.
 
@@ -134,7 +135,14 @@ def recognition_data(
         For datasets that label only positives (Jacquard): this many negatives per image are
         sampled with :func:`dlsr.datasets.sample_negatives` when an image has none. None
         samples as many as it has positives.
-    random_state : int
+    random_state : int, numpy.random.Generator or None
+        Resolved with ``numpy.random.default_rng`` (a Generator is used as is).
+    extra_negatives : callable or None
+        ``extra_negatives(sample, rects)`` returns further negatives of an image, an array of
+        shape (k, 5), given its labelled rectangles ``rects`` (positives then negatives, sampled
+        ones included); they are appended to that image's negatives (detection training adds
+        negatives from the detector's candidate grid this way,
+        :func:`dlsr.detection.detection_training_data`).
 
     Returns
     -------
@@ -142,6 +150,7 @@ def recognition_data(
     """
     from .datasets import sample_negatives
     from .preprocess import rectangle_images
+    from .rectangles import array_to_rects
 
     rng = np.random.default_rng(random_state)
     images, masks, labels, image_ids, object_ids = [], [], [], [], []
@@ -151,6 +160,10 @@ def recognition_data(
             k = negatives_per_image if negatives_per_image is not None else len(s.positives)
             negs = sample_negatives(s, k, rng)
         rects = list(s.positives) + negs
+        if extra_negatives is not None and rects:
+            extra = np.asarray(extra_negatives(s, rects), dtype=float).reshape(-1, 5)
+            negs = negs + array_to_rects(extra)
+            rects = rects + array_to_rects(extra)
         if not rects:
             log.warning("image %s (%s) has no rectangles: skipped", s.image_id, s.source)
             continue
@@ -222,10 +235,13 @@ def outer_folds(groups, n_splits: int, labels=None) -> list[tuple[np.ndarray, np
 
 
 def _fold_representation(data, train, learner, n_atoms, whiten, n_patches, extra, seed):
-    return fit_representation(
+    """The outer fold's representation and the CPU seconds it took (in this worker)."""
+    c0 = time.process_time()
+    rep = fit_representation(
         data.images[train], data.masks[train], learner, n_atoms=n_atoms, whiten=whiten,
         n_patches=n_patches, extra=extra, random_state=seed,
     )
+    return rep, time.process_time() - c0
 
 
 def _fit_svm(F, y, C):
@@ -238,16 +254,16 @@ def _outer_fold(data, train, test, rep: Representation, encoder, groups, inner_f
                 polarity):
     """Inner CV over (encoder param, C) on the outer training fold, then the outer test."""
     t0 = time.perf_counter()
+    c0 = time.process_time()
     best = None
     y_tr = data.labels[train]
     inner = outer_folds(groups[train], inner_folds)
-    feats = {}
-    for param in ENCODER_GRIDS[encoder]:
-        F = rectangle_features(
-            data.images[np.r_[train, test]], data.masks[np.r_[train, test]], rep, encoder,
-            param, polarity=polarity,
-        )
-        feats[param] = (F[: len(train)], F[len(train):])
+    grid = ENCODER_GRIDS[encoder]
+    both = np.r_[train, test]
+    Fs = rectangle_features_grid(data.images[both], data.masks[both], rep, encoder, grid,
+                                 polarity=polarity)
+    feats = {param: (F[: len(train)], F[len(train):]) for param, F in zip(grid, Fs, strict=True)}
+    for param in grid:
         Ftr = feats[param][0]
         for C in C_grid:
             accs = []
@@ -271,6 +287,7 @@ def _outer_fold(data, train, test, rep: Representation, encoder, groups, inner_f
         "inner_accuracy": best[0],
         "predictions": pred.tolist(),
         "seconds": time.perf_counter() - t0,
+        "cpu_seconds": time.process_time() - c0,
     }
 
 
@@ -325,9 +342,18 @@ def nested_cv_cell(
     t0 = time.perf_counter()
     groups = data.groups(split)
     folds = outer_folds(groups, n_folds, data.labels)
+    for k, (tr, _) in enumerate(folds):  # before any dictionary is learned
+        n_inner = len(np.unique(groups[tr]))
+        if n_inner < inner_folds:
+            raise ValueError(
+                f"outer training fold {k} holds only {n_inner} {split}s, fewer than the "
+                f"{inner_folds} inner folds: use fewer inner folds or outer folds, or the other "
+                f"split"
+            )
     seeds = np.random.SeedSequence(random_state).generate_state(n_folds)
     reps = representations if representations is not None else {}
     missing = [k for k in range(n_folds) if k not in reps]
+    rep_cpu = 0.0
     if missing:
         fitted = Parallel(n_jobs=n_jobs)(
             delayed(_fold_representation)(
@@ -335,7 +361,8 @@ def nested_cv_cell(
             )
             for k in missing
         )
-        reps.update(dict(zip(missing, fitted, strict=True)))
+        reps.update({k: rep for k, (rep, _) in zip(missing, fitted, strict=True)})
+        rep_cpu = float(sum(cpu for _, cpu in fitted))
     polarity = not (learner == "NKM" and encoder == "Natural")
     results = Parallel(n_jobs=n_jobs)(
         delayed(_outer_fold)(data, tr, te, reps[k], encoder, groups, inner_folds,
@@ -350,6 +377,10 @@ def nested_cv_cell(
         "std": float(accs.std()),
         "folds": results,
         "seconds": time.perf_counter() - t0,
+        # CPU seconds in the workers: the representations fitted for this cell (shared by the
+        # learner's later cells) and the outer folds
+        "representation_cpu_seconds": rep_cpu,
+        "cpu_seconds": rep_cpu + float(sum(r["cpu_seconds"] for r in results)),
     }
 
 
@@ -380,6 +411,8 @@ def run_recognition_benchmark(
     Results go to ``out_dir/results.jsonl`` (one line per finished cell, tagged with the
     configuration); a rerun with the same configuration skips finished cells. At the end it writes
     ``recognition.json`` and ``table1.md`` (and ``figure5.png`` when ``figure5_sizes`` is given).
+    Wall and worker CPU seconds are recorded per fold, per cell and for the run (CPU time divided
+    by the cores is what the run costs on an otherwise idle machine).
 
     Returns
     -------
@@ -438,6 +471,8 @@ def run_recognition_benchmark(
         "machine": {"platform": platform.platform(), "processor": platform.processor(),
                     "python": platform.python_version()},
         "seconds_this_run": time.perf_counter() - t0,
+        "cpu_seconds_this_run": float(sum(done[c].get("cpu_seconds", 0.0) for c in todo)),
+        "n_jobs": n_jobs,
         "cells": [done[c] for c in cells],
     }
     (out / "recognition.json").write_text(json.dumps(summary, indent=2))

@@ -90,6 +90,10 @@ def _register_detection(sub) -> None:
     d.add_argument("--region", choices=["auto", "background", "mask", "depth"], default="auto",
                    help="object region: the sample mask when there is one, else depth above "
                         "the table plane")
+    d.add_argument("--grid-negatives", type=float, default=1.0, metavar="RATIO",
+                   help="training negatives drawn from the detector's own candidate grid (those "
+                        "failing the rectangle metric), per labelled rectangle of an image "
+                        "(0: the labelled rectangles only)")
     d.add_argument("--folds", type=int, default=5)
     d.add_argument("--atoms", type=int, default=300)
     d.add_argument("--patches", type=int, default=100_000)
@@ -113,7 +117,8 @@ def _detection(args: argparse.Namespace) -> int:
         mapping=args.mapping, split=args.split, learner=args.learner, encoder=args.encoder,
         encoder_param=param, C=args.C, recognition_json=args.recognition,
         detector=args.detector, n_folds=args.folds, n_atoms=args.atoms,
-        n_patches=args.patches, region=args.region, rescore=args.rescore,
+        n_patches=args.patches, grid_negatives=args.grid_negatives, region=args.region,
+        rescore=args.rescore,
         coarse_to_fine=args.coarse_to_fine, max_images=args.max_images,
         n_overlays=args.overlays, save_model=args.save_model, seed=args.seed,
     )

@@ -14,6 +14,7 @@ from dlsr.detection import (
     DLSRDetector,
     ExactGridDetector,
     SearchGrid,
+    _PatchScorer,
     enumerate_candidates,
     object_region,
     table_plane_mask,
@@ -280,15 +281,47 @@ def test_bad_observation_raises_a_clear_error(bar_model):
                                          "depth": np.ones((8, 8), np.float32)})
 
 
-def test_dense_patch_scores_match_the_reference_pipeline_with_masked_entries():
-    """Box-filter standardisation + fused whitening/encoding = the reference functions, also
-    for patches with masked entries (depth holes, image border)."""
+def _variant_model(obs, kind, seed=0):
+    """Models whose patch scores take each path of the dense scorer: NKM-Natural with and
+    without whitening (triangle kernels), soft threshold with polarity (generic path)."""
+    if kind == "nkm":
+        return _random_model(obs, seed)
+    rng = np.random.default_rng(seed)
+    R = np.column_stack([rng.uniform(40, 120, 30), rng.uniform(40, 80, 30),
+                         rng.uniform(-1.5, 1.5, 30), np.full(30, 30.0), np.full(30, 20.0)])
+    im, mk = rectangle_images(obs["rgb"], obs["depth"], obs["depth_valid"], R)
+    X, M = patches.extract_patches(im, mk, 6)
+    X, M = X.reshape(-1, 288), M.reshape(-1, 288)
+    Xs = whitening.standardize_patches(X, M)
+    full = np.flatnonzero(M.all(1))
+    if kind == "nkm-unwhitened":
+        cents = Xs[rng.choice(full, 20, replace=False)].astype(np.float32)
+        D = cents / np.linalg.norm(cents, axis=1, keepdims=True)
+        rep = Representation("NKM", D, cents, None, None, None)
+        encoder, param, polarity, k = "Natural", None, False, 20
+    else:  # "st"
+        mean, P = whitening.fit_zca(Xs, M)
+        Xw = whitening.apply_zca(Xs, M, mean, P)
+        D = Xw[rng.choice(full, 20, replace=False)].astype(np.float32)
+        D /= np.linalg.norm(D, axis=1, keepdims=True)
+        rep = Representation("RP", D, None, mean, P, None)
+        encoder, param, polarity, k = "ST", 0.5, True, 40
+    return DLSRDetector(rep, encoder, param, polarity, np.zeros(4 * k), np.ones(4 * k),
+                        rng.normal(size=4 * k), 0.3)
+
+
+@pytest.mark.parametrize("kind", ["nkm", "nkm-unwhitened", "st"])
+def test_dense_patch_scores_match_the_reference_pipeline_with_masked_entries(kind):
+    """Running-sum standardisation + folded whitening/encoding (the Cholesky form of the
+    whitened norm for NKM) = the reference functions, also for patches with masked entries
+    (depth holes, image border)."""
     from dlsr.features import encode_patches
 
     obs = _scene()
-    model = _random_model(obs)
+    model = _variant_model(obs, kind)
     rng = np.random.default_rng(2)
     img = rng.normal(size=(30, 40, 8)).astype(np.float32)
+    img[..., 4] *= 30.0  # depth-like spread
     msk = np.ones(img.shape, bool)
     msk[5:12, 8:15, 4:] = False  # a depth hole
     msk[:, :3, :] = False  # outside the image
@@ -296,15 +329,48 @@ def test_dense_patch_scores_match_the_reference_pipeline_with_masked_entries():
     img *= msk
     V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
     stats = {"n_encodings": 0, "encode_seconds": 0.0, "encode_flops": 0.0}
-    S = DenseDetector(model, chunk_size=100)._score_maps(img, msk, V, stats)
+    S = DenseDetector(model, chunk_size=100)._score_maps(img, msk, _PatchScorer(model, V), stats)
     X, M = patches.extract_patches(img[None], msk[None], 6)
     X, M = X[0], M[0]
     rep = model.representation
-    Xw = whitening.apply_zca(whitening.standardize_patches(X, M), M, rep.zca_mean,
-                             rep.zca_matrix)
-    ref = encode_patches(Xw, M, rep, "Natural", None, polarity=False) @ V
+    Xw = whitening.standardize_patches(X, M)
+    if rep.zca_mean is not None:
+        Xw = whitening.apply_zca(Xw, M, rep.zca_mean, rep.zca_matrix)
+    ref = encode_patches(Xw, M, rep, model.encoder, model.encoder_param,
+                         polarity=model.polarity) @ V
+    assert (~M.all(1)).sum() > 100 and M.all(1).sum() > 100  # both kinds of patches
     np.testing.assert_allclose(S.reshape(-1, 4), ref, rtol=1e-3, atol=1e-3 * np.abs(ref).max())
     assert stats["n_encodings"] == 25 * 35
+
+
+def test_dense_exact_scores_equal_the_recognition_scores():
+    """The rescoring (recognition's rectangle images through the dense kernels) gives
+    DLSRDetector.rectangle_scores, with padding, rotation and depth holes."""
+    obs = _scene()
+    obs["depth_valid"] = obs["depth_valid"].copy()
+    obs["depth_valid"][55:60, 70:78] = False
+    model = _random_model(obs)
+    rng = np.random.default_rng(3)
+    n = 40
+    R = np.column_stack([rng.uniform(30, 130, n), rng.uniform(30, 90, n),
+                         rng.uniform(-np.pi / 2, np.pi / 2, n), rng.uniform(12, 50, n),
+                         rng.uniform(8, 30, n)])
+    ref = model.rectangle_scores(obs, R)
+    got = DenseDetector(model, n_threads=2, chunk_size=1000).exact_scores(obs, R)
+    assert got.shape == (n,) and np.ptp(ref) > 0
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-4 * (np.abs(ref).max() + 1.0))
+
+
+def test_dense_scores_do_not_depend_on_the_number_of_threads(bar_model):
+    model, _ = bar_model
+    obs = _scene(seed=3)
+    one = DenseDetector(model, grid=SMALL_GRID, n_threads=1)
+    three = DenseDetector(model, grid=SMALL_GRID, n_threads=3)
+    cand, _ = one.candidates(obs)
+    np.testing.assert_array_equal(one.score(obs, cand), three.score(obs, cand))
+    a, b = one.detect(obs), three.detect(obs)
+    np.testing.assert_array_equal(a.rects, b.rects)
+    np.testing.assert_array_equal(a.scores, b.scores)
 
 
 def test_train_detector_from_samples_gives_a_working_model(tmp_path):
@@ -321,7 +387,9 @@ def test_train_detector_from_samples_gives_a_working_model(tmp_path):
                                    obs["depth_valid"], pos, neg, mask=obs["mask"]))
     model = train_detector(samples, "NKM", "Natural", n_atoms=16, n_patches=3000,
                            random_state=0, grid=SMALL_GRID, rescore=20)
-    assert model.config["n_train_rectangles"] == 3 * 18 and model.config["grid"]["step"] == 6.0
+    # 18 labelled rectangles per image plus as many negatives from the grid (the default)
+    assert model.config["n_train_rectangles"] == 3 * 18 * 2
+    assert model.config["grid"]["step"] == 6.0
     assert model.representation.centroids is not None
     rects = model.predict(_scene(seed=7))
     assert rects and isinstance(rects[0], GraspRectangle)

@@ -337,3 +337,31 @@ def test_real_cornell_rectangles(cornell_samples_root):
     im, mk = rectangle_images(rgb, depth, valid, rects)
     _check_real(im[:-1], mk[:-1])
     assert 0 < mk[-1, ..., 0].mean() < mk[:-1, ..., 0].mean()
+
+
+def test_one_blas_thread_limits_inside_nests_and_restores():
+    """BLAS is single-threaded inside (also for a worker thread started inside, e.g. the dense
+    detector's), nested use keeps the limit, and the limits before are restored."""
+    import threading
+
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from dlsr.preprocess import _one_blas_thread
+
+    def blas_threads():
+        return sorted(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
+
+    with threadpool_limits(2, user_api="blas"):
+        before = blas_threads()
+        assert before and max(before) == 2
+        seen = []
+        with _one_blas_thread():
+            seen.append(blas_threads())
+            with _one_blas_thread():
+                seen.append(blas_threads())
+            seen.append(blas_threads())
+            worker = threading.Thread(target=lambda: seen.append(blas_threads()))
+            worker.start()
+            worker.join(10)
+        assert len(seen) == 4 and all(max(s) == 1 for s in seen)
+        assert blas_threads() == before

@@ -112,6 +112,18 @@ def test_outer_folds_never_share_a_group(separable):
         assert np.all(seen == 1)
 
 
+def test_too_few_groups_for_the_inner_folds_fails_before_learning(separable, monkeypatch):
+    # 6 objects in 3 outer folds leave 4 objects per training fold: 5 inner folds cannot work,
+    # and that must be said before any dictionary is learned
+    def no_learning(*args, **kwargs):
+        raise AssertionError("a representation was fitted before the fold check")
+
+    monkeypatch.setattr(rec, "_fold_representation", no_learning)
+    with pytest.raises(ValueError, match="outer training fold 0 holds only 4 objects"):
+        rec.nested_cv_cell(separable, "RP", "ST", split="object", n_folds=3, inner_folds=5,
+                           **SMALL)
+
+
 def test_fast_path_equals_refitting_the_pipeline(separable):
     """The factored nested CV predicts what the Pipeline predicts with the chosen parameters."""
     out = rec.nested_cv_cell(separable, "RP", "ST", split="image", n_folds=3, inner_folds=2,

@@ -1,0 +1,210 @@
+"""Compiled kernels of the dense detector (:class:`dlsr.detection.DenseDetector`).
+
+A canvas is an ``(H, W, 8)`` float32 image with an ``(H, W, 8)`` validity mask (masked values
+0); its 6x6 patches at top-left positions ``(r, c)`` are flattened row-major over
+(row, column, channel), as :func:`dlsr.patches.extract_patches` does. The kernels compute
+
+* :func:`window_stats`: the masked per-group mean and ``1 / sqrt(var + eps)`` of every patch
+  from running window sums (float64), with the conventions of
+  :func:`dlsr.whitening.standardize_patches` (groups K; R, G, B; D; normals; ``ddof=1``; a
+  group with fewer than two valid entries has variance 0);
+* :func:`gather_patches`: the standardised patches at chosen positions, one row each (masked
+  entries 0), ready for one matrix product;
+* :func:`triangle_scores`: from ``Y1 = whitened patch + mP`` and ``Y2 = whitened patch . c_k +
+  b_k`` (one product of the standardised patches with ``[P | P C^T]``), the k-means triangle
+  codes ``max(mean_k z - z_k, 0)``, ``z_k = ||x - c_k||`` (:func:`dlsr.coding.kmeans_triangle`),
+  dotted with per-quadrant weights, without storing the codes.
+
+Compiled with numba (``nogil``, cached on disk): the caller runs chunks in threads.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "PATCH",
+    "GROUP_OF_CHANNEL",
+    "window_stats",
+    "gather_patches",
+    "gather_masks",
+    "triangle_scores",
+]
+
+PATCH = 6
+#: Channel group of each of the 8 channels (K; R, G, B; D; Nx, Ny, Nz).
+GROUP_OF_CHANNEL = np.array([0, 1, 1, 1, 2, 3, 3, 3], dtype=np.int64)
+_GROUP_SIZE = np.array([1, 3, 1, 3], dtype=np.int64)
+
+
+@njit(nogil=True, cache=True)
+def _add_row(img, msk, r, col, sign, group):
+    """``col[j] += sign * (s1[4], s2[4], count[4])`` of pixel ``(r, j)`` for every column."""
+    W = img.shape[1]
+    for j in range(W):
+        for ch in range(8):
+            if msk[r, j, ch]:
+                v = np.float64(img[r, j, ch])
+                g = group[ch]
+                col[j, g] += sign * v
+                col[j, 4 + g] += sign * v * v
+                col[j, 8 + g] += sign
+
+
+@njit(nogil=True, cache=True)
+def window_stats(img, msk, eps, mean, inv, full):
+    """Masked per-group statistics of every 6x6 window.
+
+    Parameters
+    ----------
+    img : ndarray of shape (H, W, 8), float32
+    msk : ndarray of shape (H, W, 8), bool
+    eps : float
+        Added to the variance (1e-4 in :func:`dlsr.whitening.standardize_patches`).
+    mean, inv : ndarray of shape (H - 5, W - 5, 4), float32, written
+        Mean and ``1 / sqrt(var + eps)`` per channel group over the valid entries.
+    full : ndarray of shape (H - 5, W - 5), bool, written
+        True where every entry of the window is valid.
+    """
+    H, W = img.shape[0], img.shape[1]
+    Hp, Wp = H - PATCH + 1, W - PATCH + 1
+    group = GROUP_OF_CHANNEL
+    size = _GROUP_SIZE
+    col = np.zeros((W, 12))
+    acc = np.zeros(12)
+    for r in range(PATCH - 1):
+        _add_row(img, msk, r, col, 1.0, group)
+    for i in range(Hp):
+        _add_row(img, msk, i + PATCH - 1, col, 1.0, group)
+        if i > 0:
+            _add_row(img, msk, i - 1, col, -1.0, group)
+        for q in range(12):
+            acc[q] = 0.0
+        for j in range(PATCH - 1):
+            for q in range(12):
+                acc[q] += col[j, q]
+        for j in range(Wp):
+            for q in range(12):
+                acc[q] += col[j + PATCH - 1, q]
+                if j > 0:
+                    acc[q] -= col[j - 1, q]
+            ok = True
+            for g in range(4):
+                cnt = np.floor(acc[8 + g] + 0.5)
+                s1 = acc[g]
+                mu = s1 / max(cnt, 1.0)
+                var = 0.0
+                if cnt >= 2.0:
+                    var = max(acc[4 + g] - s1 * mu, 0.0) / (cnt - 1.0)
+                mean[i, j, g] = mu
+                inv[i, j, g] = 1.0 / np.sqrt(var + eps)
+                if cnt != PATCH * PATCH * size[g]:
+                    ok = False
+            full[i, j] = ok
+
+
+@njit(nogil=True, cache=True)
+def gather_patches(img, msk, rows, cols, mean, inv, full, X):
+    """Standardised patches at ``(rows[t], cols[t])`` into ``X[t]`` (masked entries 0).
+
+    Parameters
+    ----------
+    img, msk : ndarray of shape (H, W, 8)
+    rows, cols : ndarray of shape (n,), int
+        Top-left corners.
+    mean, inv, full :
+        From :func:`window_stats`.
+    X : ndarray of shape (n, 288), float32, written
+    """
+    group = GROUP_OF_CHANNEL
+    mu = np.empty(8, np.float32)
+    iv = np.empty(8, np.float32)
+    for t in range(len(rows)):
+        r = rows[t]
+        c = cols[t]
+        for ch in range(8):
+            mu[ch] = mean[r, c, group[ch]]
+            iv[ch] = inv[r, c, group[ch]]
+        if full[r, c]:
+            for dy in range(PATCH):
+                for dx in range(PATCH):
+                    o = (dy * PATCH + dx) * 8
+                    for ch in range(8):
+                        X[t, o + ch] = (img[r + dy, c + dx, ch] - mu[ch]) * iv[ch]
+        else:
+            for dy in range(PATCH):
+                for dx in range(PATCH):
+                    o = (dy * PATCH + dx) * 8
+                    for ch in range(8):
+                        if msk[r + dy, c + dx, ch]:
+                            X[t, o + ch] = (img[r + dy, c + dx, ch] - mu[ch]) * iv[ch]
+                        else:
+                            X[t, o + ch] = 0.0
+
+
+@njit(nogil=True, cache=True)
+def gather_masks(msk, rows, cols, M):
+    """Patch validity at ``(rows[t], cols[t])`` into ``M[t]`` (n, 288), as float32 0/1."""
+    for t in range(len(rows)):
+        r = rows[t]
+        c = cols[t]
+        for dy in range(PATCH):
+            for dx in range(PATCH):
+                o = (dy * PATCH + dx) * 8
+                for ch in range(8):
+                    M[t, o + ch] = 1.0 if msk[r + dy, c + dx, ch] else 0.0
+
+
+@njit(nogil=True, cache=True, fastmath=True)
+def triangle_scores(Y1, o1, Y2, o2, mP, cc2, VT, S):
+    """Triangle codes dotted with quadrant weights, per row.
+
+    With ``x = Y1[t, o1:o1 + p] - mP`` (the whitened patch) and
+    ``x . c_k = Y2[t, o2 + k] - b_k``:
+    ``z_k = sqrt(max(||x||^2 + ||c_k||^2 + 2 b_k - 2 Y2[t, o2 + k], 0))``, codes
+    ``a_k = max(mean(z) - z_k, 0)``, ``S[t, q] = sum_k a_k VT[q, k]``.
+
+    Parameters
+    ----------
+    Y1 : ndarray of shape (n, m1), float32, C-contiguous
+    o1 : int
+        First column of the whitened patch in ``Y1``.
+    Y2 : ndarray of shape (n, m2), float32, C-contiguous (may be ``Y1``)
+    o2 : int
+        First column of the centroid products in ``Y2``.
+    mP : ndarray of shape (p,), float32
+    cc2 : ndarray of shape (k,), float32
+        ``||c_k||^2 + 2 b_k``.
+    VT : ndarray of shape (q, k), float32
+    S : ndarray of shape (n, q), float32, written
+    """
+    n = Y1.shape[0]
+    p = mP.shape[0]
+    k = cc2.shape[0]
+    nq = VT.shape[0]
+    zero = np.float32(0.0)
+    z = np.empty(k, np.float32)
+    for t in range(n):
+        y1 = Y1[t, o1 : o1 + p]
+        y2 = Y2[t, o2 : o2 + k]
+        nrm = zero
+        for j in range(p):
+            d = y1[j] - mP[j]
+            nrm += d * d
+        s = zero
+        for i in range(k):
+            v = nrm + cc2[i] - np.float32(2.0) * y2[i]
+            v = np.sqrt(v if v > zero else zero)
+            z[i] = v
+            s += v
+        mu = s / np.float32(k)
+        for i in range(k):
+            v = mu - z[i]
+            z[i] = v if v > zero else zero
+        for q in range(nq):
+            vq = VT[q]
+            a = zero
+            for i in range(k):
+                a += z[i] * vq[i]
+            S[t, q] = a
