@@ -689,6 +689,9 @@ def _blas_threads():
 def _dense_chunks(X, n_out, fn, chunk_size, dtype):
     """``fn(x, out)`` over row chunks, in as many threads as BLAS may use (1 BLAS thread each).
 
+    ``fn`` returns a float that is finite when the chunk's inputs are (or None: the output's
+    sum is used).
+
     Splitting rows over threads parallelises the element-wise work too, which threaded BLAS
     alone does not. Non-finite input rows give non-finite outputs (NaN and inf propagate
     through the products), so finiteness is checked on each chunk's output, in the workers.
@@ -699,8 +702,10 @@ def _dense_chunks(X, n_out, fn, chunk_size, dtype):
 
     def run(sl):
         o = out[sl]
-        fn(X[sl], o)
-        if not np.isfinite(o.sum(dtype=np.float64)) and not np.all(np.isfinite(X[sl])):
+        check = fn(X[sl], o)  # a checksum of the chunk's inputs, or None: check the output
+        if check is None:
+            check = o.sum(dtype=np.float64)
+        if not np.isfinite(check) and not np.all(np.isfinite(X[sl])):
             raise ValueError("X must be finite (no NaN or inf)")
 
     workers = min(_blas_threads(), len(slices)) if len(slices) > 1 else 1
@@ -735,17 +740,16 @@ def soft_threshold(X, D, lam, *, chunk_size=4096, dtype=np.float32):
     X, D, _ = _check_xd(X, D, check_finite=False)  # checked on the outputs, per chunk
     if not np.isfinite(lam) or lam < 0:
         raise ValueError(f"lam must be a finite number >= 0, got {lam}")
+    from dlsr._dense import soft_threshold_inplace
+
     Dt = np.ascontiguousarray(D.T, dtype=dtype)
     lam = dtype(lam) if isinstance(dtype, type) else np.dtype(dtype).type(lam)
 
     def fn(x, out):
         np.matmul(np.asarray(x, dtype=Dt.dtype), Dt, out=out)
         if lam == 0:
-            return
-        t = np.abs(out)
-        t -= lam
-        np.maximum(t, 0, out=t)
-        np.copysign(t, out, out=out)
+            return None
+        return soft_threshold_inplace(out, lam)  # one fused pass; input checksum
 
     return _dense_chunks(X, D.shape[0], fn, chunk_size, Dt.dtype)
 
@@ -766,6 +770,8 @@ def kmeans_triangle(X, centroids, *, chunk_size=4096, dtype=np.float32):
     -------
     A : ndarray of shape (n, k)
     """
+    from dlsr._dense import triangle_inplace
+
     X, C, _ = _check_xd(X, centroids, check_finite=False)  # checked on the outputs
     Ct = np.ascontiguousarray(C.T, dtype=dtype) * -2  # z = ||x||^2 - 2 x.c + ||c||^2
     cn = np.einsum("kp,kp->k", C, C).astype(Ct.dtype)
@@ -773,13 +779,7 @@ def kmeans_triangle(X, centroids, *, chunk_size=4096, dtype=np.float32):
     def fn(x, z):
         x = np.asarray(x, dtype=Ct.dtype)
         np.matmul(x, Ct, out=z)
-        z += cn
-        z += np.einsum("np,np->n", x, x)[:, None]
-        np.maximum(z, 0, out=z)
-        np.sqrt(z, out=z)
-        mu = z.mean(axis=1, keepdims=True)
-        np.subtract(mu, z, out=z)
-        np.maximum(z, 0, out=z)
+        return triangle_inplace(z, cn, np.einsum("np,np->n", x, x))  # one fused pass
 
     return _dense_chunks(X, C.shape[0], fn, chunk_size, Ct.dtype)
 

@@ -164,8 +164,8 @@ def detection_benchmark(
     data, format: str, out, scale=None, mapping=None, split: str = "object",
     learner: str = "NKM", encoder: str = "Natural", encoder_param=None, C: float | None = None,
     recognition_json=None, detector: str = "dense", n_folds: int = 5, n_atoms: int = 300,
-    n_patches: int = 100_000, grid_negatives: float = 1.0, region: str = "auto",
-    rescore: int = 300,
+    n_patches: int = 100_000, grid_negatives: float = 1.0, fit_grid: float | None = None,
+    region: str = "auto", rescore: int = 300,
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
     save_model=None, seed: int = 0, progress: bool = True, executor=None,
 ) -> dict:
@@ -173,10 +173,10 @@ def detection_benchmark(
 
     Per fold (image- or object-wise), the recognition model is trained on the training images'
     rectangles plus ``grid_negatives`` negatives per labelled rectangle drawn from the
-    detector's own candidate grid on the ``region``
-    (:func:`dlsr.detection.detection_training_data`, :func:`dlsr.detection.train_detector`;
-    saved to ``out/models/<key>_fold<k>``, keyed by the training configuration, so runs with
-    other detector options reuse it) and
+    detector's own candidate grid on the ``region``, the grid's sizes restricted to those of
+    the fold's training positives when ``fit_grid`` is a quantile
+    (:func:`dlsr.detection.train_detector`; saved to ``out/models/<key>_fold<k>``, keyed by
+    the training configuration, so runs with other detector options reuse it) and
     each test image's best rectangle is checked against every positive with the rectangle
     metric; the baselines (``random`` on the object, ``mask-pca``) run on the same images.
     Results are appended per test image to ``out/results.jsonl`` and a rerun with the same
@@ -204,7 +204,7 @@ def detection_benchmark(
     from tqdm.auto import tqdm
 
     from dlsr import datasets
-    from dlsr.detection import DLSRDetector, detection_training_data, train_detector
+    from dlsr.detection import DLSRDetector, train_detector
     from dlsr.rectangles import as_rect_array
     from dlsr.viz import draw_rectangles
 
@@ -238,7 +238,8 @@ def detection_benchmark(
         "data": str(data), "format": format, "scale": scale, "split": split, "learner": learner,
         "encoder": encoder, "encoder_param": encoder_param, "C": C, "detector": detector,
         "n_folds": n_folds, "n_atoms": n_atoms, "n_patches": n_patches,
-        "grid_negatives": float(grid_negatives), "region": region,
+        "grid_negatives": float(grid_negatives),
+        "fit_grid": None if fit_grid is None else float(fit_grid), "region": region,
         "rescore": rescore, "coarse_to_fine": coarse_to_fine, "n_images": len(samples),
         "seed": seed,
     }
@@ -246,7 +247,7 @@ def detection_benchmark(
     # fold models depend on the training configuration only (shared by detector options)
     train_cfg = {k: config[k] for k in ("data", "format", "scale", "split", "learner", "encoder",
                                         "encoder_param", "C", "n_folds", "n_atoms",
-                                        "n_patches", "grid_negatives", "region",
+                                        "n_patches", "grid_negatives", "fit_grid", "region",
                                         "n_images", "seed")}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
@@ -258,7 +259,6 @@ def detection_benchmark(
         executor = Executor("sequential", progress=False)
     ex = executor
     t_run = time.perf_counter()
-    rd = None
     bar = tqdm(total=len(samples), initial=len(done), desc="detection", disable=not progress)
     for k, (train, test) in enumerate(folds):
         todo = [i for i in test if samples[i].image_id not in done]
@@ -268,18 +268,10 @@ def detection_benchmark(
         if mpath.with_name(mpath.name + ".json").is_file():
             model = DLSRDetector.load(mpath)
         else:
-            if rd is None:  # training rectangles of every image, computed once (an image's
-                # grid negatives depend on its own positives only)
-                rd = detection_training_data(samples, grid_negatives, region=region,
-                                             random_state=seed)
-            ids = {samples[i].image_id for i in train}
-            rows = np.flatnonzero([i in ids for i in rd.image_ids])
-            sub = rec.RecognitionData(rd.images[rows], rd.masks[rows], rd.labels[rows],
-                                      rd.image_ids[rows], rd.object_ids[rows])
             model = train_detector([samples[i] for i in train], learner=learner, encoder=encoder,
                                    encoder_param=encoder_param, C=C, n_atoms=n_atoms,
                                    n_patches=n_patches, grid_negatives=grid_negatives,
-                                   random_state=seed + k, data=sub, region=region)
+                                   fit_grid=fit_grid, random_state=seed + k, region=region)
             model.save(mpath)
         det = model.detector(detector, region=region, rescore=rescore,
                              **({"coarse_to_fine": True} if coarse_to_fine else {})) \
@@ -338,7 +330,7 @@ def detection_benchmark(
         model = train_detector(samples, learner=learner, encoder=encoder,
                                encoder_param=encoder_param, C=C, n_atoms=n_atoms,
                                n_patches=n_patches, grid_negatives=grid_negatives,
-                               random_state=seed, data=rd,
+                               fit_grid=fit_grid, random_state=seed,
                                detector=detector, region=region, rescore=rescore)
         model.save(save_model)
         summary["model"] = str(save_model)

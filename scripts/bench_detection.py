@@ -8,8 +8,9 @@ with their masks; optionally the two real Cornell samples):
   seconds (wall and process CPU, per stage), patch encodings, candidates and the achieved
   GFLOP/s of the dense encoding: its useful products (whitening, centroid products and
   quadrant weights, as counted by ``DenseDetector``) over the wall time of the whole dense
-  stage (``gflops``; resizing, statistics and table look-ups count as time) and over its CPU
-  seconds (``gflops_per_cpu_second``, one core's rate);
+  stage (``gflops``; resizing, statistics and table look-ups count as time), over its CPU
+  seconds (``gflops_per_cpu_second``, one core's rate) and over the threads' seconds inside
+  the encoding itself (``gflops_per_encode_thread_second``);
 * coarse-to-fine mode: seconds, encodings, rectangle-metric agreement with the full grid;
 * the exact grid search (every candidate through rectangle images and features): on the full
   grid when it has at most ``--exact-max`` candidates, otherwise its per-candidate cost is
@@ -155,18 +156,19 @@ def main(argv=None) -> int:
                     help="run the full-grid exact search only below this many candidates")
     ap.add_argument("--exact-sample", type=int, default=300)
     ap.add_argument("--score-sample", type=int, default=400)
-    ap.add_argument("--agreement-grid", choices=["coarse", "paper"], default="coarse")
+    ap.add_argument("--agreement-grid", choices=["coarse", "paper"], default="coarse",
+                    help="coarse: 6 angles, openings and jaws 20..80, centres every 20 px")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None, help="also write the JSON here")
     args = ap.parse_args(argv)
 
     from dlsr import datasets
     from dlsr.detection import (
-        COARSE_GRID,
         PAPER_GRID,
         DenseDetector,
         DLSRDetector,
         ExactGridDetector,
+        SearchGrid,
         train_detector,
     )
 
@@ -195,7 +197,9 @@ def main(argv=None) -> int:
         # plane in 1/z, so their depth-plane region is far too large (pessimistic timings).
         images += datasets.load_cornell(SHARED / "cornell_samples")
     images += test
-    agreement_grid = COARSE_GRID if args.agreement_grid == "coarse" else PAPER_GRID
+    coarse = SearchGrid(angles_deg=tuple(range(0, 180, 30)), openings=(20, 40, 60, 80),
+                        jaws=(20, 40, 60, 80), step=20.0)
+    agreement_grid = coarse if args.agreement_grid == "coarse" else PAPER_GRID
 
     opts = {"n_threads": args.threads}
     if args.rescore is not None:
@@ -226,6 +230,8 @@ def main(argv=None) -> int:
                         "gflops": enc["encode_flops"] / max(enc["dense"], 1e-9) / 1e9,
                         "gflops_per_cpu_second":
                             enc["encode_flops"] / max(enc["dense_cpu"], 1e-9) / 1e9,
+                        "gflops_per_encode_thread_second":
+                            enc["encode_flops"] / max(enc["encode"], 1e-9) / 1e9,
                         "timings": {k: v for k, v in enc.items() if k != "encode_flops"},
                         "success": _success(d.rects, s)}
         c2f_det = DenseDetector(model, coarse_to_fine=True, n_threads=args.threads)

@@ -94,6 +94,10 @@ def _register_detection(sub) -> None:
                    help="training negatives drawn from the detector's own candidate grid (those "
                         "failing the rectangle metric), per labelled rectangle of an image "
                         "(0: the labelled rectangles only)")
+    d.add_argument("--fit-grid", type=float, default=None, metavar="Q",
+                   help="search only the openings and jaw sizes in the [Q, 1 - Q] quantile range "
+                        "of the fold's training positives (plus half a grid step), e.g. 0.025; "
+                        "default: the paper's full grid")
     d.add_argument("--folds", type=int, default=5)
     d.add_argument("--atoms", type=int, default=300)
     d.add_argument("--patches", type=int, default=100_000)
@@ -117,7 +121,8 @@ def _detection(args: argparse.Namespace) -> int:
         mapping=args.mapping, split=args.split, learner=args.learner, encoder=args.encoder,
         encoder_param=param, C=args.C, recognition_json=args.recognition,
         detector=args.detector, n_folds=args.folds, n_atoms=args.atoms,
-        n_patches=args.patches, grid_negatives=args.grid_negatives, region=args.region,
+        n_patches=args.patches, grid_negatives=args.grid_negatives,
+        fit_grid=args.fit_grid, region=args.region,
         rescore=args.rescore,
         coarse_to_fine=args.coarse_to_fine, max_images=args.max_images,
         n_overlays=args.overlays, save_model=args.save_model, seed=args.seed,

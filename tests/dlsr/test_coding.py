@@ -346,6 +346,30 @@ def test_triangle_formula(random_problem):
     np.testing.assert_allclose(kmeans_triangle(X, D), ref, atol=1e-3)
 
 
+@pytest.mark.parametrize("encode", [lambda X, D: soft_threshold(X, D, 0.5, chunk_size=16),
+                                    lambda X, D: kmeans_triangle(X, D, chunk_size=16)],
+                         ids=["soft_threshold", "triangle"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize("row", [0, 37, 99])  # first, a middle and the last chunk
+def test_dense_encoders_reject_non_finite_rows(random_problem, encode, bad, row):
+    # the fused kernels zero what they cannot threshold: the check must still see the input
+    X, D, _ = random_problem
+    Xb = np.repeat(X, 5, axis=0)[:100].copy()
+    Xb[row, 3] = bad
+    with pytest.raises(ValueError, match="finite"):
+        encode(Xb, D)
+    encode(np.repeat(X, 5, axis=0)[:100], D)  # the clean rows pass
+
+
+def test_triangle_rounding_never_gives_nan():
+    # a patch equal to a centroid: ||x||^2 - 2 x.c + ||c||^2 rounds to a tiny negative
+    rng = np.random.default_rng(3)
+    C = rng.standard_normal((20, 288)).astype(np.float32) * 30
+    A = kmeans_triangle(C, C)
+    assert np.all(np.isfinite(A)) and np.all(A >= 0)
+    assert np.all(A[np.arange(20), np.arange(20)] > 0)  # its own centroid is nearest
+
+
 def test_polarity_split():
     A = np.array([[1.0, -2.0, 0.0]])
     np.testing.assert_array_equal(polarity_split(A), [[1, 0, 0, 0, 2, 0]])

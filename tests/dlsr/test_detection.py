@@ -330,6 +330,8 @@ def test_dense_patch_scores_match_the_reference_pipeline_with_masked_entries(kin
     V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
     stats = {"n_encodings": 0, "encode_seconds": 0.0, "encode_flops": 0.0}
     S = DenseDetector(model, chunk_size=100)._score_maps(img, msk, _PatchScorer(model, V), stats)
+    S1 = DenseDetector(model)._score_maps(img, msk, _PatchScorer(model, V, n_blocks=1), stats)
+    np.testing.assert_allclose(S1, S, rtol=1e-4, atol=1e-4 * np.abs(S).max())
     X, M = patches.extract_patches(img[None], msk[None], 6)
     X, M = X[0], M[0]
     rep = model.representation
@@ -340,7 +342,7 @@ def test_dense_patch_scores_match_the_reference_pipeline_with_masked_entries(kin
                          polarity=model.polarity) @ V
     assert (~M.all(1)).sum() > 100 and M.all(1).sum() > 100  # both kinds of patches
     np.testing.assert_allclose(S.reshape(-1, 4), ref, rtol=1e-3, atol=1e-3 * np.abs(ref).max())
-    assert stats["n_encodings"] == 25 * 35
+    assert stats["n_encodings"] == 2 * 25 * 35
 
 
 def test_dense_exact_scores_equal_the_recognition_scores():

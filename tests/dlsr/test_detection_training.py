@@ -144,3 +144,71 @@ def test_train_detector_records_and_applies_grid_negatives(box_samples):
     assert with_grid.config["n_train_rectangles"] == 2 * 3 * 4
     assert with_grid.config["n_train_positive"] == without.config["n_train_positive"] == 9
     assert not np.allclose(with_grid.coef, without.coef)
+
+
+# ------------------------------------------------------------------------------------------
+# search grid fitted to the training positives
+
+
+def test_fit_search_grid_keeps_the_sizes_of_the_positives():
+    from dlsr.detection import fit_search_grid
+
+    rng = np.random.default_rng(0)
+    n = 400
+    pos = np.column_stack([rng.uniform(0, 100, n), rng.uniform(0, 100, n),
+                           rng.uniform(-1.5, 1.5, n), rng.uniform(22, 68, n),
+                           rng.uniform(11, 27, n)])
+    g = fit_search_grid(pos, PAPER_GRID, 0.0)
+    assert g.openings == (20.0, 30.0, 40.0, 50.0, 60.0, 70.0)  # 22..68 widened by 5 px
+    assert g.jaws == (10.0, 20.0, 30.0)
+    # everything but the sizes is the base grid's
+    assert (g.angles_deg, g.step, g.dilate, g.min_coverage, g.coverage_on) == (
+        PAPER_GRID.angles_deg, PAPER_GRID.step, PAPER_GRID.dilate, PAPER_GRID.min_coverage,
+        PAPER_GRID.coverage_on)
+    # a few outliers do not widen the range at the default quantile ...
+    out = np.array([[50, 50, 0.0, 8.0, 8.0]] * 4 + [[50, 50, 0.0, 90.0, 60.0]] * 4)
+    g2 = fit_search_grid(np.concatenate([pos, out]))
+    assert g2.openings == g.openings and g2.jaws == g.jaws
+    # ... but do at quantile 0
+    g3 = fit_search_grid(np.concatenate([pos, out]), quantile=0.0)
+    assert g3.openings[0] == 10.0 and g3.openings[-1] == 90.0 and g3.jaws[-1] == 60.0
+
+
+def test_fit_search_grid_degenerate_cases():
+    from dlsr.detection import fit_search_grid
+
+    one = np.array([[50.0, 50.0, 0.3, 34.0, 14.0]])
+    g = fit_search_grid(one)
+    assert g.openings == (30.0,) and g.jaws == (10.0,)  # nearest values, one pair
+    assert g.pairs() == [(30.0, 10.0)]
+    # all positives between grid values far from any: the value nearest the median is kept
+    coarse = SearchGrid(openings=(10, 90), jaws=(10,))
+    assert fit_search_grid(np.array([[5, 5, 0, 50, 10], [5, 5, 0, 52, 10]]), coarse).openings \
+        == (90.0,)
+    with pytest.raises(ValueError, match="at least one positive"):
+        fit_search_grid(np.zeros((0, 5)))
+    with pytest.raises(ValueError, match="quantile"):
+        fit_search_grid(one, quantile=0.5)
+    with pytest.raises(ValueError, match="opening >= jaw"):
+        fit_search_grid(np.array([[5, 5, 0, 10, 80]]), SearchGrid(openings=(10,), jaws=(80,)))
+
+
+def test_train_detector_fits_the_grid_and_draws_negatives_from_it(box_samples):
+    from dlsr.detection import train_detector
+
+    samples = box_samples(3)  # positives 90 x 30 px
+    model = train_detector(samples, n_atoms=8, n_patches=2000, random_state=0, grid=GRID,
+                           fit_grid=0.025)
+    assert model.config["fit_grid"] == 0.025
+    # 90 px openings lie half way between 80 and 100 (half a step each way), 30 px jaws on 30
+    assert model.config["grid"]["openings"] == [80.0, 100.0]
+    assert model.config["grid"]["jaws"] == [30.0]
+    assert model.config["grid"]["step"] == GRID.step
+    # the detector searches the fitted grid
+    assert model.detector("dense").grid.pairs() == [(80.0, 30.0), (100.0, 30.0)]
+    # the training set's grid negatives come from it too: same count, other rectangles
+    unfitted = train_detector(samples, n_atoms=8, n_patches=2000, random_state=0, grid=GRID,
+                              fit_grid=None)
+    assert unfitted.config["grid"]["openings"] == list(GRID.openings)
+    assert model.config["n_train_rectangles"] == unfitted.config["n_train_rectangles"]
+    assert not np.allclose(model.coef, unfitted.coef)
