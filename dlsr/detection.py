@@ -105,6 +105,8 @@ __all__ = [
     "detection_training_data",
     "sample_grid_negatives",
     "fit_search_grid",
+    "sample_observation",
+    "mine_hard_negatives",
     "object_region",
     "table_plane_mask",
     "background_mask",
@@ -637,9 +639,7 @@ def sample_grid_negatives(sample, n: int, rng, grid: SearchGrid = PAPER_GRID,
     if n == 0 or not sample.positives:
         return np.zeros((0, 5))
     rng = np.random.default_rng(rng)
-    obs = {"rgb": sample.rgb, "depth": sample.depth, "depth_valid": sample.depth_valid}
-    if sample.mask is not None:
-        obs["mask"] = sample.mask
+    obs = sample_observation(sample)
     reg, how = object_region(obs, background, region, min_height)
     cand = enumerate_candidates(reg, grid)
     pos = rects_to_array(sample.positives)
@@ -657,6 +657,59 @@ def sample_grid_negatives(sample, n: int, rng, grid: SearchGrid = PAPER_GRID,
     if len(out) < n:
         log.info("image %s: %d of %d grid negatives (%d candidates, region %s)",
                  sample.image_id, len(out), n, len(cand), how)
+    return out
+
+
+def sample_observation(sample) -> dict:
+    """The observation dict a detector reads (``rgb``, ``depth``, ``depth_valid``, ``mask``
+    when the sample has one) of a :class:`dlsr.datasets.GraspSample`."""
+    obs = {"rgb": sample.rgb, "depth": sample.depth, "depth_valid": sample.depth_valid}
+    if sample.mask is not None:
+        obs["mask"] = sample.mask
+    return obs
+
+
+def mine_hard_negatives(detector, samples, n: int, pool: int = 200) -> list[np.ndarray]:
+    """The best-scoring candidates that fail the rectangle metric, per image.
+
+    Hard-negative mining (Dalal and Triggs 2005; Felzenszwalb et al. 2010): the detector runs
+    on its own training images and the ``n`` best of its ``pool`` top candidates that fail the
+    rectangle metric against every positive become negatives.
+
+    Parameters
+    ----------
+    detector : ExactGridDetector or DenseDetector
+        Its ``top_k`` is raised to ``pool`` for the run (on a copy).
+    samples : sequence of GraspSample
+        Training images.
+    n : int
+        Hard negatives per image (>= 1).
+    pool : int
+        Top candidates looked at per image.
+
+    Returns
+    -------
+    list of ndarray of shape (k_i, 5)
+        One per sample, ``k_i <= n`` (0 for images without positives or candidates).
+    """
+    import copy
+
+    from .metrics import rectangle_metric_many
+    from .rectangles import rects_to_array
+
+    if int(n) != n or n < 1:
+        raise ValueError(f"n must be a positive integer, got {n}")
+    det = copy.copy(detector)
+    det.top_k = max(int(pool), int(n))
+    out = []
+    for s in samples:
+        if not s.positives:
+            out.append(np.zeros((0, 5)))
+            continue
+        d = det.detect(sample_observation(s))
+        c = d.rects[~rectangle_metric_many(d.rects, rects_to_array(s.positives))] \
+            if len(d.rects) else np.zeros((0, 5))
+        out.append(np.asarray(c[: int(n)], dtype=float).reshape(-1, 5))
     return out
 
 
@@ -769,6 +822,8 @@ def train_detector(
     negatives_per_image: int | None = None,
     grid_negatives: float = 1.0,
     fit_grid: float | None = None,
+    hard_negatives: int = 0,
+    hard_rounds: int = 1,
     random_state=0,
     data=None,
     **config,
@@ -799,6 +854,13 @@ def train_detector(
         quantile, e.g. 0.025) and saved in the model, so detection and the grid negatives use
         it; None (default) keeps the grid as given (the paper's). A departure from the
         paper, off by default.
+    hard_negatives : int
+        After the first fit, ``hard_rounds`` rounds of hard-negative mining
+        (:func:`mine_hard_negatives`): the dense detector (the model's grid and region, no
+        exact rescoring) runs on every training image, up to ``hard_negatives`` of its best
+        candidates that fail the rectangle metric join the negatives, and the SVM (not the
+        representation) is refitted. 0 (default): none, as the paper.
+    hard_rounds : int
     random_state : int
     data : RecognitionData or None
         Precomputed training rectangles of ``samples`` (skips preprocessing), e.g. from
@@ -821,6 +883,9 @@ def train_detector(
     if encoder_param is None and encoder != "Natural":
         grid = ENCODER_GRIDS[encoder]
         encoder_param = grid[len(grid) // 2 - 1]
+    if int(hard_negatives) != hard_negatives or hard_negatives < 0 or hard_rounds < 0:
+        raise ValueError("hard_negatives and hard_rounds must be integers >= 0, got "
+                         f"{hard_negatives} and {hard_rounds}")
     t0 = time.perf_counter()
     sgrid = config.get("grid", PAPER_GRID)
     if isinstance(sgrid, dict):
@@ -846,12 +911,43 @@ def train_detector(
                            polarity=polarity)
     scaler = FeatureStandardizer().fit(F)
     svm = SquaredHingeSVC(C=C).fit(scaler.transform(F), data.labels)
+    labels = np.asarray(data.labels)
+    n_hard = 0
+    if hard_negatives:
+        from .preprocess import rectangle_images
+
+        for _ in range(int(hard_rounds)):
+            model = DLSRDetector(rep, encoder, encoder_param, polarity, scaler.mean_,
+                                 scaler.scale_, np.asarray(svm.coef_[0]),
+                                 float(svm.intercept_[0]), preprocess=_default_preprocess())
+            det = model.detector("dense", grid=sgrid, region=config.get("region", "auto"),
+                                 rescore=0)
+            mined = mine_hard_negatives(det, samples, int(hard_negatives))
+            ims, mks = [], []
+            for smp, rects in zip(samples, mined, strict=True):
+                if len(rects):
+                    im, mk = rectangle_images(smp.rgb, smp.depth, smp.depth_valid,
+                                              array_to_rects(rects), size=SIZE)
+                    ims.append(im)
+                    mks.append(mk)
+            if not ims:
+                log.info("hard-negative mining found no failing candidate")
+                break
+            Fh = rectangle_features(np.concatenate(ims), np.concatenate(mks), rep, encoder,
+                                    encoder_param, polarity=polarity)
+            F = np.concatenate([F, Fh])
+            labels = np.r_[labels, np.zeros(len(Fh), labels.dtype)]
+            n_hard += len(Fh)
+            scaler = FeatureStandardizer().fit(F)
+            svm = SquaredHingeSVC(C=C).fit(scaler.transform(F), labels)
     info = {"learner": learner, "encoder": encoder, "encoder_param": _jsonable(encoder_param),
             "C": float(C), "n_atoms": int(n_atoms), "whiten": bool(whiten),
             "n_patches": int(n_patches), "grid_negatives": float(grid_negatives),
             "fit_grid": None if fit_grid is None else float(fit_grid),
-            "n_train_rectangles": int(len(data)),
-            "n_train_positive": int(np.sum(data.labels == 1)),
+            "hard_negatives": int(hard_negatives), "hard_rounds": int(hard_rounds),
+            "n_hard_negatives": int(n_hard),
+            "n_train_rectangles": int(len(labels)),
+            "n_train_positive": int(np.sum(labels == 1)),
             "train_seconds": time.perf_counter() - t0}
     info.update(config)
     if isinstance(info.get("grid"), SearchGrid):

@@ -120,10 +120,9 @@ class ObjectRandomDetector:
 
 
 def _obs(sample) -> dict:
-    obs = {"rgb": sample.rgb, "depth": sample.depth, "depth_valid": sample.depth_valid}
-    if sample.mask is not None:
-        obs["mask"] = sample.mask
-    return obs
+    from dlsr.detection import sample_observation
+
+    return sample_observation(sample)
 
 
 def _recognition_choice(path, learner: str, encoder: str):
@@ -165,6 +164,7 @@ def detection_benchmark(
     learner: str = "NKM", encoder: str = "Natural", encoder_param=None, C: float | None = None,
     recognition_json=None, detector: str = "dense", n_folds: int = 5, n_atoms: int = 300,
     n_patches: int = 100_000, grid_negatives: float = 1.0, fit_grid: float | None = None,
+    hard_negatives: int = 0,
     region: str = "auto", rescore: int = 300,
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
     save_model=None, seed: int = 0, progress: bool = True, executor=None,
@@ -174,7 +174,8 @@ def detection_benchmark(
     Per fold (image- or object-wise), the recognition model is trained on the training images'
     rectangles plus ``grid_negatives`` negatives per labelled rectangle drawn from the
     detector's own candidate grid on the ``region``, the grid's sizes restricted to those of
-    the fold's training positives when ``fit_grid`` is a quantile
+    the fold's training positives when ``fit_grid`` is a quantile, and ``hard_negatives``
+    per training image mined from the detector's own best failing candidates
     (:func:`dlsr.detection.train_detector`; saved to ``out/models/<key>_fold<k>``, keyed by
     the training configuration, so runs with other detector options reuse it) and
     each test image's best rectangle is checked against every positive with the rectangle
@@ -243,12 +244,14 @@ def detection_benchmark(
         "rescore": rescore, "coarse_to_fine": coarse_to_fine, "n_images": len(samples),
         "seed": seed,
     }
+    if hard_negatives:  # only then in the keys: earlier runs' results and models still match
+        config["hard_negatives"] = int(hard_negatives)
     key = hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
     # fold models depend on the training configuration only (shared by detector options)
     train_cfg = {k: config[k] for k in ("data", "format", "scale", "split", "learner", "encoder",
                                         "encoder_param", "C", "n_folds", "n_atoms",
                                         "n_patches", "grid_negatives", "fit_grid", "region",
-                                        "n_images", "seed")}
+                                        "n_images", "seed", "hard_negatives") if k in config}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
     done = {r["image_id"]: r for r in read_jsonl(results_path) if r.get("config_key") == key}
@@ -271,7 +274,8 @@ def detection_benchmark(
             model = train_detector([samples[i] for i in train], learner=learner, encoder=encoder,
                                    encoder_param=encoder_param, C=C, n_atoms=n_atoms,
                                    n_patches=n_patches, grid_negatives=grid_negatives,
-                                   fit_grid=fit_grid, random_state=seed + k, region=region)
+                                   fit_grid=fit_grid, hard_negatives=hard_negatives,
+                                   random_state=seed + k, region=region)
             model.save(mpath)
         det = model.detector(detector, region=region, rescore=rescore,
                              **({"coarse_to_fine": True} if coarse_to_fine else {})) \
@@ -330,7 +334,8 @@ def detection_benchmark(
         model = train_detector(samples, learner=learner, encoder=encoder,
                                encoder_param=encoder_param, C=C, n_atoms=n_atoms,
                                n_patches=n_patches, grid_negatives=grid_negatives,
-                               fit_grid=fit_grid, random_state=seed,
+                               fit_grid=fit_grid, hard_negatives=hard_negatives,
+                               random_state=seed,
                                detector=detector, region=region, rescore=rescore)
         model.save(save_model)
         summary["model"] = str(save_model)

@@ -98,6 +98,10 @@ def _register_detection(sub) -> None:
                    help="search only the openings and jaw sizes in the [Q, 1 - Q] quantile range "
                         "of the fold's training positives (plus half a grid step), e.g. 0.025; "
                         "default: the paper's full grid")
+    d.add_argument("--hard-negatives", type=int, default=0, metavar="N",
+                   help="after training, add the detector's N best failing candidates per "
+                        "training image as negatives and refit the SVM (hard-negative mining; "
+                        "default 0, as the paper)")
     d.add_argument("--folds", type=int, default=5)
     d.add_argument("--atoms", type=int, default=300)
     d.add_argument("--patches", type=int, default=100_000)
@@ -122,7 +126,7 @@ def _detection(args: argparse.Namespace) -> int:
         encoder_param=param, C=args.C, recognition_json=args.recognition,
         detector=args.detector, n_folds=args.folds, n_atoms=args.atoms,
         n_patches=args.patches, grid_negatives=args.grid_negatives,
-        fit_grid=args.fit_grid, region=args.region,
+        fit_grid=args.fit_grid, hard_negatives=args.hard_negatives, region=args.region,
         rescore=args.rescore,
         coarse_to_fine=args.coarse_to_fine, max_images=args.max_images,
         n_overlays=args.overlays, save_model=args.save_model, seed=args.seed,

@@ -24,10 +24,9 @@ GRID = SearchGrid(angles_deg=(0, 30, 60, 90, 120, 150), openings=(20, 40, 60, 80
 
 
 def _region(sample):
-    obs = {"rgb": sample.rgb, "depth": sample.depth, "depth_valid": sample.depth_valid}
-    if sample.mask is not None:
-        obs["mask"] = sample.mask
-    return object_region(obs)[0]
+    from dlsr.detection import sample_observation
+
+    return object_region(sample_observation(sample))[0]
 
 
 def _rows(a):
@@ -212,3 +211,48 @@ def test_train_detector_fits_the_grid_and_draws_negatives_from_it(box_samples):
     assert unfitted.config["grid"]["openings"] == list(GRID.openings)
     assert model.config["n_train_rectangles"] == unfitted.config["n_train_rectangles"]
     assert not np.allclose(model.coef, unfitted.coef)
+
+
+# ------------------------------------------------------------------------------------------
+# hard-negative mining
+
+
+def test_mined_negatives_are_the_detectors_best_failing_candidates(box_samples):
+    from dlsr.detection import mine_hard_negatives, sample_observation, train_detector
+
+    samples = box_samples(2)
+    model = train_detector(samples, n_atoms=8, n_patches=2000, random_state=0, grid=GRID)
+    det = model.detector("dense", grid=GRID, rescore=0, top_k=3)
+    mined = mine_hard_negatives(det, samples, 4, pool=50)
+    assert det.top_k == 3  # the caller's detector is left alone
+    assert len(mined) == 2
+    for s, m in zip(samples, mined, strict=True):
+        assert m.shape == (4, 5)
+        pos = rects_to_array(s.positives)
+        assert not rectangle_metric_many(m, pos).any()
+        # they are the first failing ones in the detector's own ranking
+        full = model.detector("dense", grid=GRID, rescore=0, top_k=50).detect(
+            sample_observation(s)).rects
+        failing = full[~rectangle_metric_many(full, pos)]
+        np.testing.assert_allclose(m, failing[:4])
+    with pytest.raises(ValueError, match="positive integer"):
+        mine_hard_negatives(det, samples, 0)
+
+
+def test_train_detector_hard_negatives_refit_the_svm_only(box_samples):
+    from dlsr.detection import train_detector
+
+    samples = box_samples(3)
+    plain = train_detector(samples, n_atoms=8, n_patches=2000, random_state=0, grid=GRID)
+    hard = train_detector(samples, n_atoms=8, n_patches=2000, random_state=0, grid=GRID,
+                          hard_negatives=3)
+    assert hard.config["hard_negatives"] == 3 and hard.config["hard_rounds"] == 1
+    assert hard.config["n_hard_negatives"] == 3 * 3
+    assert hard.config["n_train_rectangles"] == plain.config["n_train_rectangles"] + 9
+    assert hard.config["n_train_positive"] == plain.config["n_train_positive"]
+    # same representation (dictionary and whitening), another classifier
+    np.testing.assert_array_equal(hard.representation.dictionary, plain.representation.dictionary)
+    assert not np.allclose(hard.coef, plain.coef)
+    assert plain.config["n_hard_negatives"] == 0
+    with pytest.raises(ValueError, match="hard_negatives"):
+        train_detector(samples, n_atoms=8, n_patches=2000, grid=GRID, hard_negatives=-1)
