@@ -58,6 +58,7 @@ __all__ = [
     "make_recognition_model",
     "outer_folds",
     "nested_cv_cell",
+    "nested_cv_cells",
     "run_recognition_benchmark",
     "table1_markdown",
     "plot_figure5",
@@ -235,13 +236,13 @@ def outer_folds(groups, n_splits: int, labels=None) -> list[tuple[np.ndarray, np
 
 
 def _fold_representation(data, train, learner, n_atoms, whiten, n_patches, extra, seed):
-    """The outer fold's representation and the CPU seconds it took (in this worker)."""
-    c0 = time.process_time()
+    """The outer fold's representation and the CPU and wall seconds it took (in this worker)."""
+    t0, c0 = time.perf_counter(), time.process_time()
     rep = fit_representation(
         data.images[train], data.masks[train], learner, n_atoms=n_atoms, whiten=whiten,
         n_patches=n_patches, extra=extra, random_state=seed,
     )
-    return rep, time.process_time() - c0
+    return rep, time.process_time() - c0, time.perf_counter() - t0
 
 
 def _fit_svm(F, y, C):
@@ -291,6 +292,148 @@ def _outer_fold(data, train, test, rep: Representation, encoder, groups, inner_f
     }
 
 
+def _check_cells(cells):
+    for lrn, enc in cells:
+        if lrn not in LEARNERS:
+            raise ValueError(f"unknown learner {lrn!r}; choose from {LEARNERS}")
+        if enc not in ENCODERS:
+            raise ValueError(f"unknown encoder {enc!r}; choose from {ENCODERS}")
+
+
+def nested_cv_cells(
+    data: RecognitionData,
+    cells: Sequence[tuple[str, str]],
+    split: str = "image",
+    n_folds: int = 5,
+    inner_folds: int = 5,
+    C_grid: Sequence[float] = C_GRID,
+    n_atoms: int = 300,
+    whiten: bool = True,
+    n_patches: int = 100_000,
+    extra=None,
+    random_state: int = 0,
+    n_jobs: int = 1,
+    representations: dict | None = None,
+    representation_dir=None,
+):
+    """Nested cross-validation of several learner-encoder combinations, one cell at a time out.
+
+    Every (cell, outer fold) pair is one task and all of them go to one pool of ``n_jobs``
+    workers (after the representations: one task per learner and fold, also in one pool), so
+    the workers stay busy across cells instead of idling at the end of each cell's folds.
+    Cells are yielded in the order given, each as soon as its folds are done, so a caller can
+    save it before the next one finishes.
+
+    Parameters
+    ----------
+    data : RecognitionData
+    cells : sequence of (learner, encoder)
+        From :data:`dlsr.features.LEARNERS` and :data:`dlsr.features.ENCODERS`.
+    split : {"image", "object"}
+        Outer and inner folds group rectangles by image or by object.
+    n_folds, inner_folds : int
+    C_grid : sequence of float
+    n_atoms, whiten, n_patches, extra :
+        Representation settings (see :func:`dlsr.features.fit_representation`).
+    random_state : int
+        Fold ``k``'s representation is seeded from ``random_state`` and ``k`` only, so a cell's
+        result does not depend on which other cells run with it.
+    n_jobs : int
+        Workers (joblib; the active joblib backend, Ray included, when set by the caller).
+    representations : dict or None
+        Cache ``{(learner, fold index): Representation}``, filled in place when given.
+    representation_dir : path or None
+        Where fitted representations are saved (``<learner>_fold<k>.npz``) and looked up
+        first, so an interrupted run does not fit them again. The caller keys the folder by
+        the configuration.
+
+    Yields
+    ------
+    dict
+        Per cell: ``learner``, ``encoder``, ``accuracy`` (mean over outer folds, per
+        rectangle), ``std``, ``folds`` (per fold: accuracy, chosen parameters, predictions,
+        seconds), ``seconds`` (worker wall seconds of its folds, plus its learner's
+        representations for the first cell of each learner), ``representation_cpu_seconds``
+        and ``cpu_seconds`` (worker CPU seconds, on the same terms).
+    """
+    cells = [tuple(c) for c in cells]
+    _check_cells(cells)
+    groups = data.groups(split)
+    folds = outer_folds(groups, n_folds, data.labels)
+    for k, (tr, _) in enumerate(folds):  # before any dictionary is learned
+        n_inner = len(np.unique(groups[tr]))
+        if n_inner < inner_folds:
+            raise ValueError(
+                f"outer training fold {k} holds only {n_inner} {split}s, fewer than the "
+                f"{inner_folds} inner folds: use fewer inner folds or outer folds, or the other "
+                f"split"
+            )
+    seeds = np.random.SeedSequence(random_state).generate_state(n_folds)
+    reps = representations if representations is not None else {}
+    rep_dir = Path(representation_dir) if representation_dir is not None else None
+    learners = list(dict.fromkeys(lrn for lrn, _ in cells))
+    rep_cost = {lrn: [0.0, 0.0] for lrn in learners}  # wall, CPU seconds fitted here
+    missing = []
+    for lrn in learners:
+        for k in range(n_folds):
+            if (lrn, k) in reps:
+                continue
+            path = rep_dir / f"{lrn}_fold{k}.npz" if rep_dir is not None else None
+            if path is not None and path.exists():
+                with np.load(path) as z:
+                    meta = json.loads(str(z["meta"]))
+                    reps[(lrn, k)] = Representation.from_arrays(z, lrn, meta["natural_param"])
+            else:
+                missing.append((lrn, k))
+    if missing:
+        fitted = Parallel(n_jobs=n_jobs, return_as="generator")(
+            delayed(_fold_representation)(
+                data, folds[k][0], lrn, n_atoms, whiten, n_patches, extra, int(seeds[k])
+            )
+            for lrn, k in missing
+        )
+        for (lrn, k), (rep, cpu, wall) in zip(missing, fitted, strict=True):
+            reps[(lrn, k)] = rep
+            rep_cost[lrn][0] += wall
+            rep_cost[lrn][1] += cpu
+            if rep_dir is not None:
+                rep_dir.mkdir(parents=True, exist_ok=True)
+                param = rep.natural_param
+                if isinstance(param, np.generic):
+                    param = param.item()
+                meta = json.dumps({"natural_param": param})
+                np.savez(rep_dir / f"{lrn}_fold{k}.npz", meta=np.array(meta),
+                         **rep.to_arrays())
+    # heaviest cells first would balance better, but cells come out in the order given
+    tasks = [(c, k) for c in cells for k in range(n_folds)]
+    results = Parallel(n_jobs=n_jobs, return_as="generator")(
+        delayed(_outer_fold)(data, folds[k][0], folds[k][1], reps[(lrn, k)], enc, groups,
+                             inner_folds, tuple(C_grid),
+                             not (lrn == "NKM" and enc == "Natural"))
+        for (lrn, enc), k in tasks
+    )
+    charged = set()
+    done: list[dict] = []
+    for ((lrn, enc), k), res in zip(tasks, results, strict=True):
+        done.append(res)
+        if k < n_folds - 1:
+            continue
+        accs = np.array([r["accuracy"] for r in done])
+        rep_wall, rep_cpu = rep_cost[lrn] if lrn not in charged else (0.0, 0.0)
+        charged.add(lrn)
+        yield {
+            "learner": lrn,
+            "encoder": enc,
+            "accuracy": float(accs.mean()),
+            "std": float(accs.std()),
+            "folds": done,
+            "seconds": rep_wall + float(sum(r["seconds"] for r in done)),
+            "representation_cpu_seconds": rep_cpu,
+            "cpu_seconds": rep_cpu + float(sum(r["cpu_seconds"] for r in done)),
+        }
+        done = []
+
+
 def nested_cv_cell(
     data: RecognitionData,
     learner: str,
@@ -309,79 +452,22 @@ def nested_cv_cell(
 ) -> dict:
     """Nested cross-validation of one learner-encoder combination.
 
-    Parameters
-    ----------
-    data : RecognitionData
-    learner : str
-        One of :data:`dlsr.features.LEARNERS`.
-    encoder : str
-        One of :data:`dlsr.features.ENCODERS`.
-    split : {"image", "object"}
-        Outer and inner folds group rectangles by image or by object.
-    n_folds, inner_folds : int
-    C_grid : sequence of float
-    n_atoms, whiten, n_patches, extra :
-        Representation settings (see :func:`dlsr.features.fit_representation`).
-    random_state : int
-    n_jobs : int
-        Outer folds in parallel (joblib).
-    representations : dict or None
-        Cache ``{fold index: Representation}`` shared across encoders of the same learner;
-        filled in place when given.
-
-    Returns
-    -------
-    dict
-        ``accuracy`` (mean over outer folds, per rectangle), ``std``, ``folds`` (per fold:
-        accuracy, chosen parameters, seconds), ``seconds``.
+    Outer folds by image or object; per outer fold, the representation is fitted on the
+    training fold and the inner folds choose the encoder's parameter and C. See
+    :func:`nested_cv_cells` for the parameters (``representations`` here maps a fold index to
+    its Representation) and the returned record.
     """
-    if learner not in LEARNERS:
-        raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
-    if encoder not in ENCODERS:
-        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
-    t0 = time.perf_counter()
-    groups = data.groups(split)
-    folds = outer_folds(groups, n_folds, data.labels)
-    for k, (tr, _) in enumerate(folds):  # before any dictionary is learned
-        n_inner = len(np.unique(groups[tr]))
-        if n_inner < inner_folds:
-            raise ValueError(
-                f"outer training fold {k} holds only {n_inner} {split}s, fewer than the "
-                f"{inner_folds} inner folds: use fewer inner folds or outer folds, or the other "
-                f"split"
-            )
-    seeds = np.random.SeedSequence(random_state).generate_state(n_folds)
-    reps = representations if representations is not None else {}
-    missing = [k for k in range(n_folds) if k not in reps]
-    rep_cpu = 0.0
-    if missing:
-        fitted = Parallel(n_jobs=n_jobs)(
-            delayed(_fold_representation)(
-                data, folds[k][0], learner, n_atoms, whiten, n_patches, extra, int(seeds[k])
-            )
-            for k in missing
-        )
-        reps.update({k: rep for k, (rep, _) in zip(missing, fitted, strict=True)})
-        rep_cpu = float(sum(cpu for _, cpu in fitted))
-    polarity = not (learner == "NKM" and encoder == "Natural")
-    results = Parallel(n_jobs=n_jobs)(
-        delayed(_outer_fold)(data, tr, te, reps[k], encoder, groups, inner_folds,
-                             tuple(C_grid), polarity)
-        for k, (tr, te) in enumerate(folds)
-    )
-    accs = np.array([r["accuracy"] for r in results])
-    return {
-        "learner": learner,
-        "encoder": encoder,
-        "accuracy": float(accs.mean()),
-        "std": float(accs.std()),
-        "folds": results,
-        "seconds": time.perf_counter() - t0,
-        # CPU seconds in the workers: the representations fitted for this cell (shared by the
-        # learner's later cells) and the outer folds
-        "representation_cpu_seconds": rep_cpu,
-        "cpu_seconds": rep_cpu + float(sum(r["cpu_seconds"] for r in results)),
-    }
+    cache = None
+    if representations is not None:
+        cache = {(learner, k): rep for k, rep in representations.items()}
+    rec = next(nested_cv_cells(
+        data, [(learner, encoder)], split=split, n_folds=n_folds, inner_folds=inner_folds,
+        C_grid=C_grid, n_atoms=n_atoms, whiten=whiten, n_patches=n_patches, extra=extra,
+        random_state=random_state, n_jobs=n_jobs, representations=cache,
+    ))
+    if representations is not None:
+        representations.update({k: rep for (_, k), rep in cache.items()})
+    return rec
 
 
 def _config_key(config: dict) -> str:
@@ -409,7 +495,10 @@ def run_recognition_benchmark(
     """Run any subset of the 6 x 6 table, saving each cell as it finishes, and resume.
 
     Results go to ``out_dir/results.jsonl`` (one line per finished cell, tagged with the
-    configuration); a rerun with the same configuration skips finished cells. At the end it writes
+    configuration); a rerun with the same configuration skips finished cells, and the fitted
+    representations (``out_dir/representations/<configuration key>/``) are reused, so an
+    interrupted run loses at most the cells in progress. Every (cell, outer fold) is one task
+    of one worker pool (:func:`nested_cv_cells`). At the end it writes
     ``recognition.json`` and ``table1.md`` (and ``figure5.png`` when ``figure5_sizes`` is given).
     Wall and worker CPU seconds are recorded per fold, per cell and for the run (CPU time divided
     by the cores is what the run costs on an otherwise idle machine).
@@ -448,24 +537,26 @@ def run_recognition_benchmark(
         log.info("resuming: %d of %d cells already done in %s", len(cells) - len(todo),
                  len(cells), results_path)
     t0 = time.perf_counter()
-    reps: dict[str, dict] = {}
     with tqdm(total=len(cells), initial=len(cells) - len(todo), desc="recognition cells",
               disable=not progress) as bar:
-        for lrn, enc in todo:
-            bar.set_postfix_str(f"{lrn}-{enc}")
-            rec = nested_cv_cell(
-                data, lrn, enc, split=split, n_folds=n_folds, inner_folds=inner_folds,
-                C_grid=C_grid, n_atoms=n_atoms, whiten=whiten, n_patches=n_patches,
-                extra=extra, random_state=random_state, n_jobs=n_jobs,
-                representations=reps.setdefault(lrn, {}),
-            )
+        if todo:
+            bar.set_postfix_str(f"{todo[0][0]}-{todo[0][1]}")
+        records = nested_cv_cells(
+            data, todo, split=split, n_folds=n_folds, inner_folds=inner_folds, C_grid=C_grid,
+            n_atoms=n_atoms, whiten=whiten, n_patches=n_patches, extra=extra,
+            random_state=random_state, n_jobs=n_jobs,
+            representation_dir=out / "representations" / key,
+        )
+        for i, rec in enumerate(records):
             rec["config_key"] = key
             for f in rec["folds"]:
                 f.pop("predictions", None)
             with results_path.open("a") as fh:
                 fh.write(json.dumps(rec) + "\n")
-            done[(lrn, enc)] = rec
+            done[(rec["learner"], rec["encoder"])] = rec
             bar.update(1)
+            if i + 1 < len(todo):
+                bar.set_postfix_str(f"{todo[i + 1][0]}-{todo[i + 1][1]}")
     summary = {
         "config": config,
         "machine": {"platform": platform.platform(), "processor": platform.processor(),

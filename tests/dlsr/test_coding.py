@@ -444,3 +444,22 @@ def test_natural_encode_function(random_problem):
     np.testing.assert_allclose(natural_encode(X, None, "SC", D, param=0.4, polarity=False),
                                lasso(X, D, 0.4), atol=1e-6)
     assert natural_encode(X, None, "OMP", D, param=2).shape == (len(X), 2 * len(D))
+
+
+@pytest.mark.parametrize("p", [8, 288, 291])  # whole, multiple-of-64 and ragged packed widths
+def test_group_by_mask_partitions_rows_by_identical_mask(p):
+    from dlsr.coding import _group_by_mask
+
+    rng = np.random.default_rng(0)
+    kinds = rng.random((6, p)) < 0.7
+    M = kinds[rng.integers(0, 6, 500)]
+    M[:40] = rng.random((40, p)) < 0.5  # mostly unique masks
+    groups, rest = _group_by_mask(M, min_group=20)
+    seen = np.concatenate(groups + [rest])
+    assert np.array_equal(np.sort(seen), np.arange(500))
+    for rows in groups:
+        assert len(rows) >= 20 and np.all(np.diff(rows) > 0)
+        assert np.all(M[rows] == M[rows[0]])
+    # a rest row has fewer than min_group identical rows
+    for r in rest[:50]:
+        assert np.sum(np.all(M == M[r], axis=1)) < 20

@@ -160,16 +160,22 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
     assert "| NKM |" in table and "| RP |" in table
     # Drop the second cell, as if the run had been killed; the rerun computes only that one.
     (tmp_path / "results.jsonl").write_text(lines[0] + "\n")
-    calls = []
-    real = rec.nested_cv_cell
+    calls, fitted = [], []
+    real_fold, real_rep = rec._outer_fold, rec._fold_representation
 
     def counting(*a, **k):
-        calls.append((a[1], a[2]))
-        return real(*a, **k)
+        calls.append((a[3].learner, a[4]))
+        return real_fold(*a, **k)
 
-    monkeypatch.setattr(rec, "nested_cv_cell", counting)
+    def counting_rep(*a, **k):
+        fitted.append(a[2])
+        return real_rep(*a, **k)
+
+    monkeypatch.setattr(rec, "_outer_fold", counting)
+    monkeypatch.setattr(rec, "_fold_representation", counting_rep)
     again = rec.run_recognition_benchmark(separable, tmp_path, **kw)
-    assert calls == [("RP", "Natural")]
+    assert calls == [("RP", "Natural")] * 3  # its three outer folds, nothing else
+    assert fitted == []  # the representations saved by the first run are reused
     assert [c["accuracy"] for c in again["cells"]] == [c["accuracy"] for c in first["cells"]]
     saved = json.loads((tmp_path / "recognition.json").read_text())
     assert len(saved["cells"]) == 2
@@ -177,7 +183,24 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
     calls.clear()
     rec.run_recognition_benchmark(separable, tmp_path, **{**kw, "learners": ["NKM"],
                                                           "n_folds": 2})
-    assert calls == [("NKM", "Natural")]
+    assert calls == [("NKM", "Natural")] * 2
+    assert fitted == ["NKM", "NKM"]
+
+
+def test_cells_together_equal_cells_alone(separable):
+    """Scheduling several cells in one pool changes nothing in any cell's result."""
+    kw = dict(split="image", n_folds=3, inner_folds=2, random_state=0, **SMALL)
+    together = list(rec.nested_cv_cells(separable, [("RP", "ST"), ("NKM", "Natural"),
+                                                    ("RP", "Natural")], n_jobs=2, **kw))
+    assert [(c["learner"], c["encoder"]) for c in together] == [
+        ("RP", "ST"), ("NKM", "Natural"), ("RP", "Natural")]
+    alone = rec.nested_cv_cell(separable, "NKM", "Natural", **kw)
+    assert together[1]["accuracy"] == alone["accuracy"]
+    assert [f["predictions"] for f in together[1]["folds"]] == [
+        f["predictions"] for f in alone["folds"]]
+    # the learner's representation cost is charged once, to its first cell
+    assert together[0]["representation_cpu_seconds"] > 0
+    assert together[2]["representation_cpu_seconds"] == 0
 
 
 def test_bad_input_is_a_clear_error(separable):
