@@ -292,12 +292,13 @@ def _outer_fold(data, train, test, rep: Representation, encoder, groups, inner_f
     }
 
 
-def _check_cells(cells):
-    for lrn, enc in cells:
-        if lrn not in LEARNERS:
-            raise ValueError(f"unknown learner {lrn!r}; choose from {LEARNERS}")
-        if enc not in ENCODERS:
-            raise ValueError(f"unknown encoder {enc!r}; choose from {ENCODERS}")
+def _check_names(learners, encoders):
+    for name in learners:
+        if name not in LEARNERS:
+            raise ValueError(f"unknown learner {name!r}; choose from {LEARNERS}")
+    for name in encoders:
+        if name not in ENCODERS:
+            raise ValueError(f"unknown encoder {name!r}; choose from {ENCODERS}")
 
 
 def nested_cv_cells(
@@ -357,7 +358,7 @@ def nested_cv_cells(
         and ``cpu_seconds`` (worker CPU seconds, on the same terms).
     """
     cells = [tuple(c) for c in cells]
-    _check_cells(cells)
+    _check_names([lrn for lrn, _ in cells], [enc for _, enc in cells])
     groups = data.groups(split)
     folds = outer_folds(groups, n_folds, data.labels)
     for k, (tr, _) in enumerate(folds):  # before any dictionary is learned
@@ -438,33 +439,22 @@ def nested_cv_cell(
     data: RecognitionData,
     learner: str,
     encoder: str,
-    split: str = "image",
-    n_folds: int = 5,
-    inner_folds: int = 5,
-    C_grid: Sequence[float] = C_GRID,
-    n_atoms: int = 300,
-    whiten: bool = True,
-    n_patches: int = 100_000,
-    extra=None,
-    random_state: int = 0,
-    n_jobs: int = 1,
+    *,
     representations: dict | None = None,
+    **options,
 ) -> dict:
     """Nested cross-validation of one learner-encoder combination.
 
     Outer folds by image or object; per outer fold, the representation is fitted on the
     training fold and the inner folds choose the encoder's parameter and C. See
-    :func:`nested_cv_cells` for the parameters (``representations`` here maps a fold index to
-    its Representation) and the returned record.
+    :func:`nested_cv_cells` for the keyword ``options`` (split, folds, C grid, representation
+    settings, seed, n_jobs; their defaults are that function's) and the returned record;
+    ``representations`` here maps a fold index to its Representation.
     """
     cache = None
     if representations is not None:
         cache = {(learner, k): rep for k, rep in representations.items()}
-    rec = next(nested_cv_cells(
-        data, [(learner, encoder)], split=split, n_folds=n_folds, inner_folds=inner_folds,
-        C_grid=C_grid, n_atoms=n_atoms, whiten=whiten, n_patches=n_patches, extra=extra,
-        random_state=random_state, n_jobs=n_jobs, representations=cache,
-    ))
+    rec = next(nested_cv_cells(data, [(learner, encoder)], representations=cache, **options))
     if representations is not None:
         representations.update({k: rep for (_, k), rep in cache.items()})
     return rec
@@ -512,12 +502,7 @@ def run_recognition_benchmark(
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    for name in learners:
-        if name not in LEARNERS:
-            raise ValueError(f"unknown learner {name!r}; choose from {LEARNERS}")
-    for name in encoders:
-        if name not in ENCODERS:
-            raise ValueError(f"unknown encoder {name!r}; choose from {ENCODERS}")
+    _check_names(learners, encoders)
     if len(data) == 0:
         raise ValueError("the dataset has no rectangles")
     _check_both_classes(data.labels, "the dataset")

@@ -119,12 +119,6 @@ class ObjectRandomDetector:
         return [GraspRectangle(x, y, rng.uniform(-np.pi / 2, np.pi / 2), w, h)]
 
 
-def _obs(sample) -> dict:
-    from dlsr.detection import sample_observation
-
-    return sample_observation(sample)
-
-
 def _recognition_choice(path, learner: str, encoder: str):
     """The most often chosen (encoder_param, C) of a recognition.json cell, or (None, None)."""
     import json
@@ -141,7 +135,9 @@ def _recognition_choice(path, learner: str, encoder: str):
 
 def _detect_one(det, s, baselines, seed, base: dict) -> dict:
     """Detect on one labelled image and score it and the baselines by the rectangle metric."""
-    obs = _obs(s)
+    from dlsr.detection import sample_observation
+
+    obs = sample_observation(s)
     d = det.detect(obs)
     rec_ = {**base, "image_id": s.image_id, "object_id": s.object_id, "seconds": d.seconds,
             "n_candidates": d.n_candidates, "n_encodings": d.n_encodings, "reason": d.reason}
