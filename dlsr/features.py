@@ -13,6 +13,7 @@ so that ``Pipeline``, ``GridSearchCV``, ``cross_val_score`` and group splitters 
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,8 +34,10 @@ __all__ = [
     "fit_representation",
     "encode_patches",
     "encode_patches_grid",
+    "encode_patches_multi",
     "rectangle_features",
     "rectangle_features_grid",
+    "rectangle_features_multi",
     "DLSRFeatures",
 ]
 
@@ -244,13 +247,57 @@ def fit_representation(
     return Representation(learner, np.asarray(D, np.float32), centroids, mean, P, natural_param)
 
 
-def encode_patches_grid(X, M, rep: Representation, encoder: str, params,
-                        polarity: bool = True) -> list[np.ndarray]:
-    """Encode preprocessed patches for several values of the encoder's parameter.
+# The computation behind each encoder's grid: (method, masked); Natural depends on the learner.
+_ENCODER_METHOD = {
+    "SC": ("lasso", False),
+    "mSC": ("lasso", True),
+    "OMP": ("omp", False),
+    "mOMP": ("omp", True),
+    "ST": ("threshold", False),
+}
 
-    One homotopy path gives every lasso penalty (:func:`dlsr.coding.lasso_path`) and one OMP
-    run every number of atoms (:func:`dlsr.coding.omp_path`), so a grid costs about as much as
-    its most expensive member.
+
+def _encoder_plan(rep: Representation, encoder: str, params):
+    """``(method, masked, values, polarity)`` of an encoder's grid on ``rep``.
+
+    Natural becomes its learner's computation (:func:`dlsr.coding.natural_spec`), so that, for
+    example, SC-Natural reads the SC lasso path at the dictionary's lambda and RP-Natural the
+    soft threshold's projection.
+    """
+    params = list(params)
+    if encoder == "Natural":
+        spec = coding.natural_spec(rep.learner, rep.natural_param)
+        return spec["method"], spec["masked"], [spec["value"]] * len(params), spec["polarity"]
+    if encoder not in _ENCODER_METHOD:
+        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
+    method, masked = _ENCODER_METHOD[encoder]
+    values = [int(v) for v in params] if method == "omp" else [float(v) for v in params]
+    return method, masked, values, True
+
+
+def _method_codes(X, M, rep: Representation, method: str, masked: bool, values) -> list:
+    """Codes of one computation for each of ``values`` (in that order), unsplit."""
+    D = rep.dictionary
+    mask = M if masked else None
+    if method == "lasso":
+        return list(coding.lasso_path(X, D, values, mask=mask))
+    if method == "omp":
+        return list(coding.omp_path(X, D, values, mask=mask))
+    if method == "threshold":
+        return list(coding.soft_threshold_path(X, D, values))
+    atoms = rep.centroids if rep.centroids is not None else D
+    return [coding.kmeans_triangle(X, atoms)] * len(values)
+
+
+def encode_patches_multi(X, M, rep: Representation, grids: dict, polarity: bool = True,
+                         cpu_seconds: dict | None = None) -> dict:
+    """Encode preprocessed patches for several encoders, each computation done once.
+
+    Encoders that share a computation share it: SC and SC-Natural one lasso path, OMP and
+    OMP-Natural one OMP run, mOMP and GSVQ-Natural one masked OMP run, ST and RP/R-Natural one
+    matrix product. One homotopy path gives every lasso penalty
+    (:func:`dlsr.coding.lasso_path`) and one OMP run every number of atoms
+    (:func:`dlsr.coding.omp_path`), so a grid costs about as much as its most expensive member.
 
     Parameters
     ----------
@@ -258,37 +305,61 @@ def encode_patches_grid(X, M, rep: Representation, encoder: str, params,
         Standardised (and whitened) patches, masked entries 0.
     M : ndarray of shape (m, 288), bool
     rep : Representation
-    encoder : {"SC", "mSC", "OMP", "mOMP", "ST", "Natural"}
-    params : sequence
-        lambdas for SC/mSC/ST, numbers of non-zeros for OMP/mOMP; Natural ignores them (its
-        parameter is the dictionary's) and returns the same array for each.
+    grids : dict
+        ``{encoder: params}``, encoders from :data:`ENCODERS`: lambdas for SC/mSC/ST, numbers
+        of non-zeros for OMP/mOMP; Natural ignores its params (its parameter is the
+        dictionary's) and gets the same array for each.
     polarity : bool
         Polarity splitting ``[max(a, 0), max(-a, 0)]`` (never for NKM-Natural).
+    cpu_seconds : dict or None
+        When given, the process CPU seconds of each computation are added under
+        ``(method, masked)``.
+
+    Returns
+    -------
+    dict
+        ``{encoder: list of ndarray of shape (m, k)}``, one array per parameter, ``k = 2 *
+        n_atoms`` with polarity splitting, else ``n_atoms``. Encoders sharing a code array share
+        the same object.
+    """
+    plans = {enc: _encoder_plan(rep, enc, params) for enc, params in grids.items()}
+    needed: dict = {}
+    for method, masked, values, _ in plans.values():
+        bucket = needed.setdefault((method, masked), [])
+        bucket.extend(v for v in values if v not in bucket)
+    codes = {}
+    for (method, masked), values in needed.items():
+        c0 = time.process_time()
+        for v, A in zip(values, _method_codes(X, M, rep, method, masked, values), strict=True):
+            codes[(method, masked, v)] = A
+        if cpu_seconds is not None:
+            key = (method, masked)
+            cpu_seconds[key] = cpu_seconds.get(key, 0.0) + time.process_time() - c0
+    split: dict = {}
+    out = {}
+    for enc, (method, masked, values, pol) in plans.items():
+        arrays = []
+        for v in values:
+            key = (method, masked, v, bool(polarity and pol))
+            if key not in split:
+                A = codes[(method, masked, v)]
+                split[key] = coding.polarity_split(A) if key[3] else A
+            arrays.append(split[key])
+        out[enc] = arrays
+    return out
+
+
+def encode_patches_grid(X, M, rep: Representation, encoder: str, params,
+                        polarity: bool = True) -> list[np.ndarray]:
+    """Encode preprocessed patches for several values of one encoder's parameter.
+
+    See :func:`encode_patches_multi` (this is its one-encoder case).
 
     Returns
     -------
     list of ndarray of shape (m, k), one per parameter
-        ``k = 2 * n_atoms`` with polarity splitting, else ``n_atoms``.
     """
-    D = rep.dictionary
-    params = list(params)
-    if encoder == "SC":
-        codes = coding.lasso_path(X, D, params)
-    elif encoder == "mSC":
-        codes = coding.lasso_path(X, D, params, mask=M)
-    elif encoder == "OMP":
-        codes = coding.omp_path(X, D, [int(v) for v in params])
-    elif encoder == "mOMP":
-        codes = coding.omp_path(X, D, [int(v) for v in params], mask=M)
-    elif encoder == "ST":
-        codes = [coding.soft_threshold(X, D, v) for v in params]
-    elif encoder == "Natural":
-        A = coding.natural_encode(X, M, rep.learner, D, centroids=rep.centroids,
-                                  param=rep.natural_param, polarity=polarity)
-        return [A] * len(params)
-    else:
-        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
-    return [coding.polarity_split(A) if polarity else A for A in codes]
+    return encode_patches_multi(X, M, rep, {encoder: params}, polarity)[encoder]
 
 
 def encode_patches(X, M, rep: Representation, encoder: str, param=None, polarity: bool = True):
@@ -314,6 +385,73 @@ def encode_patches(X, M, rep: Representation, encoder: str, param=None, polarity
     return encode_patches_grid(X, M, rep, encoder, [param], polarity)[0]
 
 
+def rectangle_features_multi(
+    images,
+    masks,
+    rep: Representation,
+    grids: dict,
+    polarity: bool = True,
+    chunk_size: int = 64,
+    cpu_seconds: dict | None = None,
+) -> dict:
+    """Features of many rectangles for several encoders and parameters, streamed in chunks.
+
+    Patches are extracted, standardised and whitened once per chunk for all encoders, and
+    shared computations run once (:func:`encode_patches_multi`).
+
+    Parameters
+    ----------
+    images, masks : ndarray of shape (n, 24, 24, 8)
+    rep : Representation
+    grids : dict
+        ``{encoder: params}`` (see :func:`encode_patches_multi`).
+    polarity : bool
+    chunk_size : int
+        Rectangles encoded at once (each is 361 patches).
+    cpu_seconds : dict or None
+        When given, process CPU seconds are added per computation ``(method, masked)`` and
+        under ``"patches"`` (extraction, standardisation, whitening) and ``"pooling"``.
+
+    Returns
+    -------
+    dict
+        ``{encoder: list of ndarray of shape (n, 4 * k), float32}``, one per parameter.
+    """
+    images = np.asarray(images, dtype=np.float32)
+    masks = np.asarray(masks, dtype=bool)
+    n = len(images)
+    if n == 0:
+        raise ValueError("no rectangles to featurise")
+    for enc, params in grids.items():
+        if not list(params):
+            raise ValueError(f"params of {enc!r} must hold at least one encoder parameter")
+    acc = cpu_seconds if cpu_seconds is not None else {}
+    out = None
+    for start in range(0, n, chunk_size):
+        c0 = time.process_time()
+        P, PM = patches.extract_patches(images[start:start + chunk_size],
+                                        masks[start:start + chunk_size], PATCH_SIZE)
+        b, g, p = P.shape
+        Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
+                                 (rep.zca_mean, rep.zca_matrix))
+        acc["patches"] = acc.get("patches", 0.0) + time.process_time() - c0
+        codes = encode_patches_multi(Xp, PM.reshape(b * g, p), rep, grids, polarity, acc)
+        c0 = time.process_time()
+        side = int(round(np.sqrt(g)))
+        pooled: dict = {}
+        for A in (A for arrays in codes.values() for A in arrays):
+            if id(A) not in pooled:
+                pooled[id(A)] = quadrant_pool(A.reshape(b, side, side, -1))
+        if out is None:
+            out = {enc: [np.empty((n, pooled[id(A)].shape[1]), dtype=np.float32)
+                         for A in arrays] for enc, arrays in codes.items()}
+        for enc, arrays in codes.items():
+            for t, A in enumerate(arrays):
+                out[enc][t][start:start + b] = pooled[id(A)]
+        acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
+    return out
+
+
 def rectangle_features_grid(
     images,
     masks,
@@ -323,48 +461,18 @@ def rectangle_features_grid(
     polarity: bool = True,
     chunk_size: int = 64,
 ) -> list[np.ndarray]:
-    """Features of many rectangles for several encoder parameters, streamed in chunks.
+    """Features of many rectangles for several values of one encoder's parameter.
 
-    Patches are extracted, standardised and whitened once per chunk and encoded for every
-    parameter (:func:`encode_patches_grid`).
-
-    Parameters
-    ----------
-    images, masks : ndarray of shape (n, 24, 24, 8)
-    rep : Representation
-    encoder, polarity : see :func:`encode_patches`
-    params : sequence
-        Encoder parameters (see :func:`encode_patches_grid`).
-    chunk_size : int
-        Rectangles encoded at once (each is 361 patches).
+    The one-encoder case of :func:`rectangle_features_multi`.
 
     Returns
     -------
     list of ndarray of shape (n, 4 * k), float32, one per parameter
     """
-    images = np.asarray(images, dtype=np.float32)
-    masks = np.asarray(masks, dtype=bool)
-    params = list(params)
-    n = len(images)
-    if n == 0:
-        raise ValueError("no rectangles to featurise")
-    if not params:
+    if not list(params):
         raise ValueError("params must hold at least one encoder parameter")
-    out = None
-    for start in range(0, n, chunk_size):
-        P, PM = patches.extract_patches(images[start:start + chunk_size],
-                                        masks[start:start + chunk_size], PATCH_SIZE)
-        b, g, p = P.shape
-        Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
-                                 (rep.zca_mean, rep.zca_matrix))
-        codes = encode_patches_grid(Xp, PM.reshape(b * g, p), rep, encoder, params, polarity)
-        side = int(round(np.sqrt(g)))
-        for t, A in enumerate(codes):
-            pooled = quadrant_pool(A.reshape(b, side, side, -1))
-            if out is None:
-                out = [np.empty((n, pooled.shape[1]), dtype=np.float32) for _ in params]
-            out[t][start:start + b] = pooled
-    return out
+    return rectangle_features_multi(images, masks, rep, {encoder: params}, polarity,
+                                    chunk_size)[encoder]
 
 
 def rectangle_features(

@@ -42,8 +42,9 @@ from .features import (
     LEARNERS,
     DLSRFeatures,
     Representation,
+    _encoder_plan,
     fit_representation,
-    rectangle_features_grid,
+    rectangle_features_multi,
 )
 from .records import read_jsonl
 from .svm import FeatureStandardizer, SquaredHingeSVC
@@ -251,21 +252,13 @@ def _fit_svm(F, y, C):
     return scaler, svm
 
 
-def _outer_fold(data, train, test, rep: Representation, encoder, groups, inner_folds, C_grid,
-                polarity):
-    """Inner CV over (encoder param, C) on the outer training fold, then the outer test."""
-    t0 = time.perf_counter()
-    c0 = time.process_time()
+def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
+    """Inner CV over (encoder param, C) on the outer training fold, then the outer test.
+
+    ``feats`` maps each encoder parameter to its (training, test) features.
+    """
     best = None
-    y_tr = data.labels[train]
-    inner = outer_folds(groups[train], inner_folds)
-    grid = ENCODER_GRIDS[encoder]
-    both = np.r_[train, test]
-    Fs = rectangle_features_grid(data.images[both], data.masks[both], rep, encoder, grid,
-                                 polarity=polarity)
-    feats = {param: (F[: len(train)], F[len(train):]) for param, F in zip(grid, Fs, strict=True)}
-    for param in grid:
-        Ftr = feats[param][0]
+    for param, (Ftr, _) in feats.items():
         for C in C_grid:
             accs = []
             for itr, iva in inner:
@@ -276,20 +269,62 @@ def _outer_fold(data, train, test, rep: Representation, encoder, groups, inner_f
             score = float(np.mean(accs)) if accs else -np.inf
             if best is None or score > best[0] + 1e-12:
                 best = (score, param, C)
-    _, param, C = best
+    score, param, C = best
     Ftr, Fte = feats[param]
     scaler, svm = _fit_svm(Ftr, y_tr, C)
     pred = svm.predict(scaler.transform(Fte))
     return {
-        "accuracy": float(np.mean(pred == data.labels[test])),
-        "n_test": int(len(test)),
+        "accuracy": float(np.mean(pred == y_te)),
+        "n_test": int(len(y_te)),
         "encoder_param": param,
         "C": C,
-        "inner_accuracy": best[0],
+        "inner_accuracy": score,
         "predictions": pred.tolist(),
-        "seconds": time.perf_counter() - t0,
-        "cpu_seconds": time.process_time() - c0,
     }
+
+
+def _learner_fold(data, train, test, rep: Representation, encoders, groups, inner_folds,
+                  C_grid):
+    """One outer fold of every cell of one learner: shared features, then each encoder's CV.
+
+    Patches are extracted and whitened once for all encoders and shared computations run once
+    (:func:`dlsr.features.rectangle_features_multi`). Each encoder's ``seconds`` and
+    ``cpu_seconds`` are its own classifier time plus its share of the features: a computation's
+    CPU time is split evenly between the encoders that read it, the patches and pooling evenly
+    between all (wall time in the same proportions).
+    """
+    t0, c0 = time.perf_counter(), time.process_time()
+    y_tr, y_te = data.labels[train], data.labels[test]
+    inner = outer_folds(groups[train], inner_folds)
+    both = np.r_[train, test]
+    grids = {enc: ENCODER_GRIDS[enc] for enc in encoders}
+    cpu: dict = {}
+    Fs = rectangle_features_multi(data.images[both], data.masks[both], rep, grids,
+                                  polarity=True, cpu_seconds=cpu)
+    feature_cpu = time.process_time() - c0
+    feature_wall = time.perf_counter() - t0
+    users: dict = {}
+    for enc in encoders:
+        method, masked, _, _ = _encoder_plan(rep, enc, grids[enc])
+        users.setdefault((method, masked), []).append(enc)
+    shared = sum(v for k, v in cpu.items() if k not in users)
+    shared += feature_cpu - sum(cpu.values())  # anything not timed inside
+    share = {enc: shared / len(encoders) for enc in encoders}
+    for key, encs in users.items():
+        for enc in encs:
+            share[enc] += cpu.get(key, 0.0) / len(encs)
+    results = {}
+    for enc in encoders:
+        t1, c1 = time.perf_counter(), time.process_time()
+        feats = {param: (F[: len(train)], F[len(train):])
+                 for param, F in zip(grids[enc], Fs[enc], strict=True)}
+        res = _choose_and_test(feats, y_tr, y_te, inner, tuple(C_grid))
+        own_cpu = time.process_time() - c1
+        wall_share = feature_wall * share[enc] / max(feature_cpu, 1e-12)
+        res["seconds"] = time.perf_counter() - t1 + wall_share
+        res["cpu_seconds"] = own_cpu + share[enc]
+        results[enc] = res
+    return results
 
 
 def _check_names(learners, encoders):
@@ -319,11 +354,14 @@ def nested_cv_cells(
 ):
     """Nested cross-validation of several learner-encoder combinations, one cell at a time out.
 
-    Every (cell, outer fold) pair is one task and all of them go to one pool of ``n_jobs``
-    workers (after the representations: one task per learner and fold, also in one pool), so
-    the workers stay busy across cells instead of idling at the end of each cell's folds.
-    Cells are yielded in the order given, each as soon as its folds are done, so a caller can
-    save it before the next one finishes.
+    Every (learner, outer fold) pair is one task and all of them go to one pool of ``n_jobs``
+    workers (after the representations, also one task per learner and fold in one pool), so
+    the workers stay busy across cells. A task computes the features of all of the learner's
+    encoders at once: patches are extracted and whitened once, and encoders that read the same
+    codes share them (SC and SC-Natural, OMP and OMP-Natural, mOMP and GSVQ-Natural, ST and
+    RP/R-Natural; :func:`dlsr.features.encode_patches_multi`). A learner's cells are yielded,
+    in the order given, as soon as its folds are done, so a caller can save them before the
+    next learner finishes.
 
     Parameters
     ----------
@@ -405,34 +443,36 @@ def nested_cv_cells(
                 meta = json.dumps({"natural_param": param})
                 np.savez(rep_dir / f"{lrn}_fold{k}.npz", meta=np.array(meta),
                          **rep.to_arrays())
-    # heaviest cells first would balance better, but cells come out in the order given
-    tasks = [(c, k) for c in cells for k in range(n_folds)]
+    # one task per (learner, fold): the learner's encoders share patches and computations
+    encoders_of: dict = {}
+    for lrn, enc in cells:
+        encoders_of.setdefault(lrn, []).append(enc)
+    tasks = [(lrn, k) for lrn in learners for k in range(n_folds)]
     results = Parallel(n_jobs=n_jobs, return_as="generator")(
-        delayed(_outer_fold)(data, folds[k][0], folds[k][1], reps[(lrn, k)], enc, groups,
-                             inner_folds, tuple(C_grid),
-                             not (lrn == "NKM" and enc == "Natural"))
-        for (lrn, enc), k in tasks
+        delayed(_learner_fold)(data, folds[k][0], folds[k][1], reps[(lrn, k)],
+                               encoders_of[lrn], groups, inner_folds, tuple(C_grid))
+        for lrn, k in tasks
     )
-    charged = set()
-    done: list[dict] = []
-    for ((lrn, enc), k), res in zip(tasks, results, strict=True):
-        done.append(res)
+    fold_results: dict = {}
+    for (lrn, k), res in zip(tasks, results, strict=True):
+        fold_results[(lrn, k)] = res
         if k < n_folds - 1:
             continue
-        accs = np.array([r["accuracy"] for r in done])
-        rep_wall, rep_cpu = rep_cost[lrn] if lrn not in charged else (0.0, 0.0)
-        charged.add(lrn)
-        yield {
-            "learner": lrn,
-            "encoder": enc,
-            "accuracy": float(accs.mean()),
-            "std": float(accs.std()),
-            "folds": done,
-            "seconds": rep_wall + float(sum(r["seconds"] for r in done)),
-            "representation_cpu_seconds": rep_cpu,
-            "cpu_seconds": rep_cpu + float(sum(r["cpu_seconds"] for r in done)),
-        }
-        done = []
+        rep_wall, rep_cpu = rep_cost[lrn]
+        for i, enc in enumerate(encoders_of[lrn]):
+            done = [fold_results[(lrn, f)][enc] for f in range(n_folds)]
+            accs = np.array([r["accuracy"] for r in done])
+            charged = (rep_wall, rep_cpu) if i == 0 else (0.0, 0.0)
+            yield {
+                "learner": lrn,
+                "encoder": enc,
+                "accuracy": float(accs.mean()),
+                "std": float(accs.std()),
+                "folds": done,
+                "seconds": charged[0] + float(sum(r["seconds"] for r in done)),
+                "representation_cpu_seconds": charged[1],
+                "cpu_seconds": charged[1] + float(sum(r["cpu_seconds"] for r in done)),
+            }
 
 
 def nested_cv_cell(
@@ -487,7 +527,7 @@ def run_recognition_benchmark(
     Results go to ``out_dir/results.jsonl`` (one line per finished cell, tagged with the
     configuration); a rerun with the same configuration skips finished cells, and the fitted
     representations (``out_dir/representations/<configuration key>/``) are reused, so an
-    interrupted run loses at most the cells in progress. Every (cell, outer fold) is one task
+    interrupted run loses at most the cells in progress. Every (learner, outer fold) is one task
     of one worker pool (:func:`nested_cv_cells`). At the end it writes
     ``recognition.json`` and ``table1.md`` (and ``figure5.png`` when ``figure5_sizes`` is given).
     Wall and worker CPU seconds are recorded per fold, per cell and for the run (CPU time divided

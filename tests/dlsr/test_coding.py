@@ -21,6 +21,7 @@ from dlsr.coding import (
     omp_path,
     polarity_split,
     soft_threshold,
+    soft_threshold_path,
 )
 
 
@@ -338,6 +339,17 @@ def test_soft_threshold_matches_sklearn(random_problem, lam):
     np.testing.assert_allclose(soft_threshold(X, D, lam), R, atol=1e-4)
 
 
+def test_soft_threshold_path_is_each_threshold(random_problem):
+    X, D, _ = random_problem
+    lams = [1.5, 0.0, 0.5]
+    P = soft_threshold_path(X, D, lams, dtype=np.float64)
+    assert P.shape == (3, len(X), len(D))
+    for t, lam in enumerate(lams):
+        np.testing.assert_allclose(P[t], soft_threshold(X, D, lam, dtype=np.float64), atol=1e-12)
+    with pytest.raises(ValueError, match="lams"):
+        soft_threshold_path(X, D, [0.5, -1.0])
+
+
 def test_triangle_formula(random_problem):
     X, D, _ = random_problem
     Z = np.linalg.norm(X[:, None, :] - D[None], axis=2)
@@ -444,6 +456,22 @@ def test_natural_encode_function(random_problem):
     np.testing.assert_allclose(natural_encode(X, None, "SC", D, param=0.4, polarity=False),
                                lasso(X, D, 0.4), atol=1e-6)
     assert natural_encode(X, None, "OMP", D, param=2).shape == (len(X), 2 * len(D))
+
+
+def test_natural_spec_names_each_learner_computation():
+    from dlsr.coding import natural_spec
+
+    assert natural_spec("SC", 0.7) == dict(method="lasso", masked=False, polarity=True,
+                                           value=0.7)
+    assert natural_spec("SC")["value"] == 1.0 and natural_spec("OMP")["value"] == 10
+    assert natural_spec("OMP", 3.0)["value"] == 3
+    assert natural_spec("GSVQ") == dict(method="omp", masked=True, polarity=True, value=1)
+    assert natural_spec("RP") == natural_spec("R") == dict(method="threshold", masked=False,
+                                                           polarity=True, value=0.0)
+    assert natural_spec("NKM") == dict(method="triangle", masked=False, polarity=False,
+                                       value=None)
+    with pytest.raises(ValueError, match="unknown dictionary method"):
+        natural_spec("KSVD")
 
 
 @pytest.mark.parametrize("p", [8, 288, 291])  # whole, multiple-of-64 and ragged packed widths

@@ -161,20 +161,20 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
     # Drop the second cell, as if the run had been killed; the rerun computes only that one.
     (tmp_path / "results.jsonl").write_text(lines[0] + "\n")
     calls, fitted = [], []
-    real_fold, real_rep = rec._outer_fold, rec._fold_representation
+    real_fold, real_rep = rec._learner_fold, rec._fold_representation
 
     def counting(*a, **k):
-        calls.append((a[3].learner, a[4]))
+        calls.append((a[3].learner, tuple(a[4])))
         return real_fold(*a, **k)
 
     def counting_rep(*a, **k):
         fitted.append(a[2])
         return real_rep(*a, **k)
 
-    monkeypatch.setattr(rec, "_outer_fold", counting)
+    monkeypatch.setattr(rec, "_learner_fold", counting)
     monkeypatch.setattr(rec, "_fold_representation", counting_rep)
     again = rec.run_recognition_benchmark(separable, tmp_path, **kw)
-    assert calls == [("RP", "Natural")] * 3  # its three outer folds, nothing else
+    assert calls == [("RP", ("Natural",))] * 3  # its three outer folds, nothing else
     assert fitted == []  # the representations saved by the first run are reused
     assert [c["accuracy"] for c in again["cells"]] == [c["accuracy"] for c in first["cells"]]
     saved = json.loads((tmp_path / "recognition.json").read_text())
@@ -183,24 +183,29 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
     calls.clear()
     rec.run_recognition_benchmark(separable, tmp_path, **{**kw, "learners": ["NKM"],
                                                           "n_folds": 2})
-    assert calls == [("NKM", "Natural")] * 2
+    assert calls == [("NKM", ("Natural",))] * 2
     assert fitted == ["NKM", "NKM"]
 
 
 def test_cells_together_equal_cells_alone(separable):
-    """Scheduling several cells in one pool changes nothing in any cell's result."""
+    """Scheduling several cells together, sharing a learner's codes, changes no cell's result."""
     kw = dict(split="image", n_folds=3, inner_folds=2, random_state=0, **SMALL)
     together = list(rec.nested_cv_cells(separable, [("RP", "ST"), ("NKM", "Natural"),
                                                     ("RP", "Natural")], n_jobs=2, **kw))
+    # a learner's cells come out together, in the order given
     assert [(c["learner"], c["encoder"]) for c in together] == [
-        ("RP", "ST"), ("NKM", "Natural"), ("RP", "Natural")]
-    alone = rec.nested_cv_cell(separable, "NKM", "Natural", **kw)
-    assert together[1]["accuracy"] == alone["accuracy"]
-    assert [f["predictions"] for f in together[1]["folds"]] == [
-        f["predictions"] for f in alone["folds"]]
+        ("RP", "ST"), ("RP", "Natural"), ("NKM", "Natural")]
+    for cell in together:
+        alone = rec.nested_cv_cell(separable, cell["learner"], cell["encoder"], **kw)
+        assert cell["accuracy"] == alone["accuracy"]
+        assert [f["predictions"] for f in cell["folds"]] == [
+            f["predictions"] for f in alone["folds"]]
+        assert [f["encoder_param"] for f in cell["folds"]] == [
+            f["encoder_param"] for f in alone["folds"]]
     # the learner's representation cost is charged once, to its first cell
     assert together[0]["representation_cpu_seconds"] > 0
-    assert together[2]["representation_cpu_seconds"] == 0
+    assert together[1]["representation_cpu_seconds"] == 0
+    assert all(f["cpu_seconds"] > 0 for c in together for f in c["folds"])
 
 
 def test_bad_input_is_a_clear_error(separable):

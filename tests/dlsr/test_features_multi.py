@@ -1,0 +1,95 @@
+"""Several encoders at once: shared patches and shared codes give each encoder's own codes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dlsr import coding
+from dlsr.features import (
+    ENCODER_GRIDS,
+    ENCODERS,
+    Representation,
+    encode_patches_multi,
+    rectangle_features_grid,
+    rectangle_features_multi,
+)
+
+P = 288
+
+
+@pytest.fixture(scope="module")
+def problem():
+    rng = np.random.default_rng(4)
+    X = rng.standard_normal((120, P)).astype(np.float32)
+    M = rng.random((120, P)) > 0.2
+    M[:40] = True  # a group of fully valid rows beside per-row masks
+    X[~M] = 0.0
+    D = rng.standard_normal((24, P))
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    return X, M, D.astype(np.float32)
+
+
+def _alone(X, M, rep, encoder, param):
+    """Each encoder computed on its own by the coding functions."""
+    D = rep.dictionary
+    if encoder == "SC":
+        return coding.polarity_split(coding.lasso(X, D, param))
+    if encoder == "mSC":
+        return coding.polarity_split(coding.lasso(X, D, param, mask=M))
+    if encoder == "OMP":
+        return coding.polarity_split(coding.omp(X, D, param))
+    if encoder == "mOMP":
+        return coding.polarity_split(coding.omp(X, D, param, mask=M))
+    if encoder == "ST":
+        return coding.polarity_split(coding.soft_threshold(X, D, param))
+    return coding.natural_encode(X, M, rep.learner, D, centroids=rep.centroids,
+                                 param=rep.natural_param)
+
+
+@pytest.mark.parametrize("learner,natural_param", [("SC", 1.0), ("OMP", 5), ("GSVQ", None),
+                                                   ("RP", None), ("NKM", None)])
+def test_multi_equals_each_encoder_alone(problem, learner, natural_param):
+    X, M, D = problem
+    centroids = 1.5 * D if learner == "NKM" else None
+    rep = Representation(learner, D, centroids, None, None, natural_param)
+    grids = {enc: ENCODER_GRIDS[enc] for enc in ENCODERS}
+    cpu = {}
+    out = encode_patches_multi(X, M, rep, grids, cpu_seconds=cpu)
+    assert set(out) == set(ENCODERS)
+    for enc in ENCODERS:
+        assert len(out[enc]) == len(grids[enc])
+        for param, A in zip(grids[enc], out[enc], strict=True):
+            np.testing.assert_allclose(A, _alone(X, M, rep, enc, param), atol=2e-5,
+                                       err_msg=f"{learner}-{enc} {param}")
+    # the natural encoder reads the codes of the encoder computing the same thing
+    shared = {"SC": ("SC", 1), "OMP": ("OMP", 1), "GSVQ": ("mOMP", 0), "RP": None, "NKM": None}
+    if shared[learner] is not None:
+        enc, t = shared[learner]
+        assert out["Natural"][0] is out[enc][t]
+    assert set(cpu) == {("lasso", False), ("lasso", True), ("omp", False), ("omp", True),
+                        ("threshold", False)} | ({("triangle", False)} if learner == "NKM"
+                                                 else set())
+
+
+def test_rectangle_features_multi_equals_one_encoder_at_a_time():
+    rng = np.random.default_rng(5)
+    images = rng.standard_normal((7, 24, 24, 8)).astype(np.float32)
+    masks = rng.random((7, 24, 24, 8)) > 0.1
+    masks[:, :, 20:] = False  # padding columns
+    D = rng.standard_normal((16, P))
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    rep = Representation("RP", D.astype(np.float32), None, None, None, None)
+    grids = {"SC": (0.5, 1.0), "ST": (0.5, 1.0), "Natural": (None,), "mOMP": (1, 5)}
+    cpu = {}
+    multi = rectangle_features_multi(images, masks, rep, grids, chunk_size=3, cpu_seconds=cpu)
+    for enc, params in grids.items():
+        alone = rectangle_features_grid(images, masks, rep, enc, params, chunk_size=5)
+        for a, b in zip(multi[enc], alone, strict=True):
+            assert a.shape == (7, 4 * 2 * 16)
+            np.testing.assert_allclose(a, b, atol=1e-3, rtol=1e-5)
+    assert cpu["patches"] > 0 and "pooling" in cpu
+    with pytest.raises(ValueError, match="unknown encoder"):
+        rectangle_features_multi(images, masks, rep, {"XYZ": (1,)})
+    with pytest.raises(ValueError, match="at least one encoder parameter"):
+        rectangle_features_multi(images, masks, rep, {"SC": ()})
