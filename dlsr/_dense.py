@@ -278,3 +278,45 @@ def triangle_inplace(Z, cn, xx):
             v = mu - row[i]
             row[i] = v if v > 0 else 0.0
     return total
+
+
+@njit(nogil=True, cache=True)
+def split_pool(A, split, polarity, out):
+    """Quadrant sum pooling of a code map, with polarity splitting, in one pass.
+
+    ``out[b]`` gets, for the quadrants top-left, top-right, bottom-left, bottom-right (rows and
+    columns ``[:split]`` / ``[split:]``), the sums of ``max(a, 0)`` then of ``max(-a, 0)``
+    (``2 k`` values per quadrant) when ``polarity``, else the sums of ``a`` (``k`` values):
+    what :func:`dlsr.features.quadrant_pool` gives on the split codes, without materialising
+    them. Sums are accumulated in float64.
+
+    Parameters
+    ----------
+    A : ndarray of shape (n, R, C, k)
+    split : int
+    polarity : bool
+    out : ndarray of shape (n, 4 * k * (2 if polarity else 1)), written
+    """
+    n, R, C, k = A.shape
+    width = 2 * k if polarity else k
+    acc = np.zeros(4 * width)
+    for b in range(n):
+        for x in range(4 * width):
+            acc[x] = 0.0
+        for r in range(R):
+            for c in range(C):
+                q = (2 if r >= split else 0) + (1 if c >= split else 0)
+                base = q * width
+                row = A[b, r, c]
+                if polarity:
+                    for j in range(k):
+                        v = np.float64(row[j])
+                        if v > 0:
+                            acc[base + j] += v
+                        else:
+                            acc[base + k + j] -= v
+                else:
+                    for j in range(k):
+                        acc[base + j] += row[j]
+        for x in range(4 * width):
+            out[b, x] = acc[x]

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["lasso_path_rows"]
+__all__ = ["lasso_path_rows", "masked_least_squares"]
 
 
 _FAST = {"reassoc", "contract", "nsz"}  # vectorised sums and FMA; infinities stay exact
@@ -340,3 +340,56 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
             pen[act[a]] = 0.0
         for x in range(n_excl):
             pen[excluded[x]] = 0.0
+
+
+@njit(nogil=True, cache=True)
+def masked_least_squares(slots, D, M, B, out):
+    """Exact masked least squares on each row's selected atoms (masked OMP's coefficients).
+
+    For row ``i`` with atoms ``S = slots[i][slots[i] >= 0]``, solves
+    ``(D_S diag(m_i) D_S^T) a = B[i, S]`` in float64 and writes ``a`` into ``out[i, S]``.
+    The Gram block is summed over the row's valid entries only.
+
+    Parameters
+    ----------
+    slots : ndarray of shape (r, t), int64
+        Selected atoms per row, ``-1`` for an empty slot.
+    D : ndarray of shape (d, p), float64
+    M : ndarray of shape (r, p), bool
+    B : ndarray of shape (r, d), float64
+        Masked correlations ``D diag(m_i) x_i``.
+    out : ndarray of shape (r, d), float64, zero-initialised, written
+    """
+    r, t = slots.shape
+    p = D.shape[1]
+    idx = np.empty(t, dtype=np.int64)
+    valid = np.empty(p, dtype=np.int64)
+    for i in range(r):
+        k = 0
+        for s in range(t):
+            if slots[i, s] >= 0:
+                idx[k] = slots[i, s]
+                k += 1
+        if k == 0:
+            continue
+        nv = 0
+        for q in range(p):
+            if M[i, q]:
+                valid[nv] = q
+                nv += 1
+        G = np.empty((k, k))
+        rhs = np.empty(k)
+        for a in range(k):
+            da = D[idx[a]]
+            for b in range(a + 1):
+                db = D[idx[b]]
+                s = 0.0
+                for v in range(nv):
+                    q = valid[v]
+                    s += da[q] * db[q]
+                G[a, b] = s
+                G[b, a] = s
+            rhs[a] = B[i, idx[a]]
+        coef = np.linalg.solve(G, rhs)
+        for a in range(k):
+            out[i, idx[a]] = coef[a]

@@ -534,6 +534,8 @@ def _omp_batch(B, stops, op, exact_ls):
     number of atoms, so the solution with ``L`` atoms is the least-squares fit on the first
     ``L`` atoms selected by any longer run.
     """
+    from dlsr._homotopy import masked_least_squares
+
     r, d = B.shape
     stops = [min(int(s), d) for s in stops]
     out = np.zeros((len(stops), r, d))
@@ -565,13 +567,9 @@ def _omp_batch(B, stops, op, exact_ls):
         sl = slots[:, :t1]
         if not exact_ls or t1 == 0:
             return _scatter(sl, coef[:, :t1], d)
-        on = sl >= 0
-        Ds = op.D64[np.maximum(sl, 0)] * on[:, :, None]  # (r, t1, p)
-        Gaa = np.matmul(Ds * op.M[:, None, :], Ds.transpose(0, 2, 1))
-        Gaa[~on] = 0.0
-        Gaa += np.eye(t1) * (~on)[:, :, None]  # empty slots: identity rows, zero right side
-        rhs = np.where(on, B[rc, np.maximum(sl, 0)], 0.0)
-        return _scatter(sl, np.linalg.solve(Gaa, rhs[:, :, None])[:, :, 0], d)
+        W = np.zeros((r, d))
+        masked_least_squares(np.ascontiguousarray(sl), op.D64, op.M, B, W)  # compiled
+        return W
 
     for t in range(L):
         cabs = np.abs(c)

@@ -125,6 +125,16 @@ def quadrant_pool(codes, split: int = POOL_SPLIT) -> np.ndarray:
     return np.concatenate(quads, axis=1)
 
 
+def _split_pool(codes, polarity: bool, split: int = POOL_SPLIT) -> np.ndarray:
+    """``quadrant_pool(polarity_split(codes))`` (or of the codes) in one compiled pass."""
+    from ._dense import split_pool
+
+    n, _, _, k = codes.shape
+    out = np.empty((n, 4 * k * (2 if polarity else 1)), dtype=np.float32)
+    split_pool(np.ascontiguousarray(codes), split, polarity, out)
+    return out
+
+
 @dataclass
 class Representation:
     """What unsupervised learning produces: whitening and a dictionary.
@@ -322,9 +332,31 @@ def encode_patches_multi(X, M, rep: Representation, grids: dict, polarity: bool 
         n_atoms`` with polarity splitting, else ``n_atoms``. Encoders sharing a code array share
         the same object.
     """
-    plans = {enc: _encoder_plan(rep, enc, params) for enc, params in grids.items()}
+    plans, codes = _multi_codes(X, M, rep, grids, cpu_seconds)
+    split: dict = {}
+    out = {}
+    for enc, keys in plans.items():
+        arrays = []
+        for key in keys:
+            if key not in split:
+                A = codes[key[:3]]
+                split[key] = coding.polarity_split(A) if polarity and key[3] else A
+            arrays.append(split[key])
+        out[enc] = arrays
+    return out
+
+
+def _multi_codes(X, M, rep, grids, cpu_seconds):
+    """Unsplit codes of each computation the encoders need, each computed once.
+
+    Returns ``plans`` (per encoder, one key ``(method, masked, value, split)`` per parameter)
+    and ``codes`` (``(method, masked, value)`` -> unsplit codes).
+    """
+    plans = {}
     needed: dict = {}
-    for method, masked, values, _ in plans.values():
+    for enc, params in grids.items():
+        method, masked, values, pol = _encoder_plan(rep, enc, params)
+        plans[enc] = [(method, masked, v, pol) for v in values]
         bucket = needed.setdefault((method, masked), [])
         bucket.extend(v for v in values if v not in bucket)
     codes = {}
@@ -335,18 +367,7 @@ def encode_patches_multi(X, M, rep: Representation, grids: dict, polarity: bool 
         if cpu_seconds is not None:
             key = (method, masked)
             cpu_seconds[key] = cpu_seconds.get(key, 0.0) + time.process_time() - c0
-    split: dict = {}
-    out = {}
-    for enc, (method, masked, values, pol) in plans.items():
-        arrays = []
-        for v in values:
-            key = (method, masked, v, bool(polarity and pol))
-            if key not in split:
-                A = codes[(method, masked, v)]
-                split[key] = coding.polarity_split(A) if key[3] else A
-            arrays.append(split[key])
-        out[enc] = arrays
-    return out
+    return plans, codes
 
 
 def encode_patches_grid(X, M, rep: Representation, encoder: str, params,
@@ -435,19 +456,21 @@ def rectangle_features_multi(
         Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
                                  (rep.zca_mean, rep.zca_matrix))
         acc["patches"] = acc.get("patches", 0.0) + time.process_time() - c0
-        codes = encode_patches_multi(Xp, PM.reshape(b * g, p), rep, grids, polarity, acc)
+        plans, codes = _multi_codes(Xp, PM.reshape(b * g, p), rep, grids, acc)
         c0 = time.process_time()
         side = int(round(np.sqrt(g)))
         pooled: dict = {}
-        for A in (A for arrays in codes.values() for A in arrays):
-            if id(A) not in pooled:
-                pooled[id(A)] = quadrant_pool(A.reshape(b, side, side, -1))
+        for keys in plans.values():
+            for key in keys:
+                if key not in pooled:
+                    pooled[key] = _split_pool(codes[key[:3]].reshape(b, side, side, -1),
+                                              bool(polarity and key[3]))
         if out is None:
-            out = {enc: [np.empty((n, pooled[id(A)].shape[1]), dtype=np.float32)
-                         for A in arrays] for enc, arrays in codes.items()}
-        for enc, arrays in codes.items():
-            for t, A in enumerate(arrays):
-                out[enc][t][start:start + b] = pooled[id(A)]
+            out = {enc: [np.empty((n, pooled[key].shape[1]), dtype=np.float32) for key in keys]
+                   for enc, keys in plans.items()}
+        for enc, keys in plans.items():
+            for t, key in enumerate(keys):
+                out[enc][t][start:start + b] = pooled[key]
         acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
     return out
 
