@@ -160,7 +160,7 @@ def detection_benchmark(
     learner: str = "NKM", encoder: str = "Natural", encoder_param=None, C: float | None = None,
     recognition_json=None, detector: str = "dense", n_folds: int = 5, n_atoms: int = 300,
     n_patches: int = 100_000, grid_negatives: float = 1.0, fit_grid: float | None = None,
-    hard_negatives: int = 0,
+    hard_negatives: int = 0, hard_rounds: int = 1,
     region: str = "auto", rescore: int = 300,
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
     save_model=None, seed: int = 0, progress: bool = True, executor=None,
@@ -171,7 +171,8 @@ def detection_benchmark(
     rectangles plus ``grid_negatives`` negatives per labelled rectangle drawn from the
     detector's own candidate grid on the ``region``, the grid's sizes restricted to those of
     the fold's training positives when ``fit_grid`` is a quantile, and ``hard_negatives``
-    per training image mined from the detector's own best failing candidates
+    per training image mined from the detector's own best failing candidates (``hard_rounds``
+    rounds of mining and refitting)
     (:func:`dlsr.detection.train_detector`; saved to ``out/models/<key>_fold<k>``, keyed by
     the training configuration, so runs with other detector options reuse it) and
     each test image's best rectangle is checked against every positive with the rectangle
@@ -213,6 +214,8 @@ def detection_benchmark(
         raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
     if encoder not in ENCODERS:
         raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
+    if int(hard_rounds) != hard_rounds or hard_rounds < 0:
+        raise ValueError(f"hard_rounds must be an integer >= 0, got {hard_rounds}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     samples = load_samples(data, format, scale, mapping)
@@ -242,12 +245,15 @@ def detection_benchmark(
     }
     if hard_negatives:  # only then in the keys: earlier runs' results and models still match
         config["hard_negatives"] = int(hard_negatives)
+        if hard_rounds != 1:
+            config["hard_rounds"] = int(hard_rounds)
     key = hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
     # fold models depend on the training configuration only (shared by detector options)
     train_cfg = {k: config[k] for k in ("data", "format", "scale", "split", "learner", "encoder",
                                         "encoder_param", "C", "n_folds", "n_atoms",
                                         "n_patches", "grid_negatives", "fit_grid", "region",
-                                        "n_images", "seed", "hard_negatives") if k in config}
+                                        "n_images", "seed", "hard_negatives", "hard_rounds")
+                 if k in config}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
     done = {r["image_id"]: r for r in read_jsonl(results_path) if r.get("config_key") == key}
@@ -271,7 +277,8 @@ def detection_benchmark(
                                    encoder_param=encoder_param, C=C, n_atoms=n_atoms,
                                    n_patches=n_patches, grid_negatives=grid_negatives,
                                    fit_grid=fit_grid, hard_negatives=hard_negatives,
-                                   random_state=seed + k, region=region)
+                                   hard_rounds=hard_rounds, random_state=seed + k,
+                                   region=region)
             model.save(mpath)
         det = model.detector(detector, region=region, rescore=rescore,
                              **({"coarse_to_fine": True} if coarse_to_fine else {})) \
@@ -331,7 +338,7 @@ def detection_benchmark(
                                encoder_param=encoder_param, C=C, n_atoms=n_atoms,
                                n_patches=n_patches, grid_negatives=grid_negatives,
                                fit_grid=fit_grid, hard_negatives=hard_negatives,
-                               random_state=seed,
+                               hard_rounds=hard_rounds, random_state=seed,
                                detector=detector, region=region, rescore=rescore)
         model.save(save_model)
         summary["model"] = str(save_model)

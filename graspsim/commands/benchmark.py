@@ -102,6 +102,8 @@ def _register_detection(sub) -> None:
                    help="after training, add the detector's N best failing candidates per "
                         "training image as negatives and refit the SVM (hard-negative mining; "
                         "default 0, as the paper)")
+    d.add_argument("--hard-rounds", type=int, default=1, metavar="R",
+                   help="rounds of hard-negative mining, each on the refitted model (default 1)")
     d.add_argument("--folds", type=int, default=5)
     d.add_argument("--atoms", type=int, default=300)
     d.add_argument("--patches", type=int, default=100_000)
@@ -126,7 +128,8 @@ def _detection(args: argparse.Namespace) -> int:
         encoder_param=param, C=args.C, recognition_json=args.recognition,
         detector=args.detector, n_folds=args.folds, n_atoms=args.atoms,
         n_patches=args.patches, grid_negatives=args.grid_negatives,
-        fit_grid=args.fit_grid, hard_negatives=args.hard_negatives, region=args.region,
+        fit_grid=args.fit_grid, hard_negatives=args.hard_negatives,
+        hard_rounds=args.hard_rounds, region=args.region,
         rescore=args.rescore,
         coarse_to_fine=args.coarse_to_fine, max_images=args.max_images,
         n_overlays=args.overlays, save_model=args.save_model, seed=args.seed,

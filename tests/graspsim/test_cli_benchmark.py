@@ -1,8 +1,10 @@
-"""`graspsim benchmark recognition` from the command line, on a Cornell-format fixture."""
+"""`graspsim benchmark recognition` and `detection` on Cornell-format fixtures."""
 
 from __future__ import annotations
 
 import json
+
+import pytest
 
 from dlsr.datasets import write_cornell
 from graspsim.cli import main
@@ -37,3 +39,29 @@ def test_recognition_benchmark_cli_bad_input(tmp_path, capsys):
     code = main(["benchmark", "recognition", "--data", str(tmp_path), "--format", "cornell",
                  "--learners", "KSVD", "--out", str(tmp_path / "o")])
     assert code == 2
+
+
+def test_detection_benchmark_cli_passes_the_mining_options(tmp_path, box_samples, monkeypatch,
+                                                           capsys):
+    import dlsr.detection
+
+    root = write_cornell(box_samples(5), tmp_path / "cornell")
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_train(samples, **kw):
+        seen.append(kw)
+        raise Stop
+
+    monkeypatch.setattr(dlsr.detection, "train_detector", fake_train)
+    base = ["benchmark", "detection", "--data", str(root), "--format", "cornell", "--split",
+            "image", "--hard-negatives", "5", "--out", str(tmp_path / "o")]
+    with pytest.raises(Stop):
+        main(base + ["--hard-rounds", "2"])
+    with pytest.raises(Stop):
+        main(base)
+    assert [(kw["hard_negatives"], kw["hard_rounds"]) for kw in seen] == [(5, 2), (5, 1)]
+    assert main(base + ["--hard-rounds", "-1"]) == 2
+    assert "hard_rounds must be an integer >= 0" in capsys.readouterr().err
