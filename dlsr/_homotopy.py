@@ -19,6 +19,9 @@ step of iterative refinement, the correlations are recomputed exactly, and the l
 (KKT) conditions are checked: ``|c_j| <= lam`` off the support, sign agreement on it. A row that
 fails, or exceeds the step limit, is flagged so that the caller solves it another way.
 
+Also here, as the other compiled per-row solve of :mod:`dlsr.coding`: masked OMP's exact
+float64 least squares on each row's selected atoms (:func:`masked_least_squares`).
+
 Compiled with numba (``nogil``, cached on disk): callers run chunks of rows in threads.
 """
 

@@ -1018,15 +1018,13 @@ def natural_spec(learner, param=None) -> dict:
         raise ValueError(f"unknown dictionary method {learner!r}; expected one of "
                          f"{tuple(_NATURAL)}")
     spec = dict(_NATURAL[learner])
+    fixed = spec.pop("lam", None), spec.pop("n_nonzero", None)  # at most one is set
     if learner == "SC":
-        value = 1.0 if param is None else float(param)
+        spec["value"] = 1.0 if param is None else float(param)
     elif learner == "OMP":
-        value = 10 if param is None else int(param)
+        spec["value"] = 10 if param is None else int(param)
     else:
-        value = spec.pop("lam", spec.pop("n_nonzero", None))
-    spec.pop("lam", None)
-    spec.pop("n_nonzero", None)
-    spec["value"] = value
+        spec["value"] = fixed[0] if fixed[0] is not None else fixed[1]
     return spec
 
 

@@ -492,8 +492,6 @@ def rectangle_features_grid(
     -------
     list of ndarray of shape (n, 4 * k), float32, one per parameter
     """
-    if not list(params):
-        raise ValueError("params must hold at least one encoder parameter")
     return rectangle_features_multi(images, masks, rep, {encoder: params}, polarity,
                                     chunk_size)[encoder]
 
