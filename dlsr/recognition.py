@@ -63,6 +63,7 @@ __all__ = [
     "run_recognition_benchmark",
     "table1_markdown",
     "plot_figure5",
+    "figure5_markdown",
 ]
 
 log = logging.getLogger(__name__)
@@ -504,6 +505,49 @@ def _config_key(config: dict) -> str:
     return hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
 
 
+def _done_cells(results_path: Path, key: str) -> dict:
+    return {(r["learner"], r["encoder"]): r for r in read_jsonl(results_path)
+            if r.get("config_key") == key}
+
+
+def _run_config(data, out: Path, config: dict, cells, extra, n_jobs, bar) -> tuple[dict, list]:
+    """The cells of one configuration: read from ``results.jsonl``, the missing ones computed.
+
+    Each computed cell is appended to ``results.jsonl`` (tagged with the configuration's key) as
+    soon as it finishes; representations go to ``out/representations/<key>/``.
+
+    Returns
+    -------
+    records : dict
+        ``{(learner, encoder): record}`` for every cell asked for.
+    todo : list
+        The cells computed here.
+    """
+    key = _config_key(config)
+    results_path = out / "results.jsonl"
+    done = _done_cells(results_path, key)
+    todo = [c for c in cells if c not in done]
+    if todo:
+        bar.set_postfix_str(f"{todo[0][0]}-{todo[0][1]} d={config['n_atoms']}"
+                            + ("" if config["whiten"] else " unwhitened"))
+        records = nested_cv_cells(
+            data, todo, split=config["split"], n_folds=config["n_folds"],
+            inner_folds=config["inner_folds"], C_grid=config["C_grid"],
+            n_atoms=config["n_atoms"], whiten=config["whiten"], n_patches=config["n_patches"],
+            extra=extra, random_state=config["random_state"], n_jobs=n_jobs,
+            representation_dir=out / "representations" / key,
+        )
+        for rec in records:
+            rec["config_key"] = key
+            for f in rec["folds"]:
+                f.pop("predictions", None)
+            with results_path.open("a") as fh:
+                fh.write(json.dumps(rec) + "\n")
+            done[(rec["learner"], rec["encoder"])] = rec
+            bar.update(1)
+    return {c: done[c] for c in cells}, todo
+
+
 def run_recognition_benchmark(
     data: RecognitionData,
     out_dir,
@@ -529,9 +573,16 @@ def run_recognition_benchmark(
     representations (``out_dir/representations/<configuration key>/``) are reused, so an
     interrupted run loses at most the cells in progress. Every (learner, outer fold) is one task
     of one worker pool (:func:`nested_cv_cells`). At the end it writes
-    ``recognition.json`` and ``table1.md`` (and ``figure5.png`` when ``figure5_sizes`` is given).
+    ``recognition.json`` and ``table1.md``.
     Wall and worker CPU seconds are recorded per fold, per cell and for the run (CPU time divided
     by the cores is what the run costs on an otherwise idle machine).
+
+    With ``figure5_sizes``, the paper's Figure 5 follows: the cells of
+    :data:`FIGURE5_COMBINATIONS` for every dictionary size, with and without whitening, all
+    other settings as the table's. Each point is a cell of its own configuration in the same
+    ``results.jsonl`` (so it resumes the same way, and the table's cells at the table's size and
+    whitening are not computed twice); the points go to ``recognition.json`` (``"figure5"``),
+    ``figure5.md`` and ``figure5.png``.
 
     Returns
     -------
@@ -546,58 +597,61 @@ def run_recognition_benchmark(
     if len(data) == 0:
         raise ValueError("the dataset has no rectangles")
     _check_both_classes(data.labels, "the dataset")
+    sizes = [int(d) for d in figure5_sizes] if figure5_sizes else []
+    if any(d < 1 for d in sizes):
+        raise ValueError(f"figure 5 dictionary sizes must be positive, got {list(figure5_sizes)}")
     config = {
         "split": split, "n_folds": n_folds, "inner_folds": inner_folds,
         "C_grid": list(C_grid), "n_atoms": n_atoms, "whiten": whiten,
         "n_patches": n_patches, "extra": extra is not None, "random_state": random_state,
         "n_rectangles": len(data),
     }
-    key = _config_key(config)
-    results_path = out / "results.jsonl"
-    done = {(rec["learner"], rec["encoder"]): rec for rec in read_jsonl(results_path)
-            if rec.get("config_key") == key}
     cells = [(lrn, enc) for lrn in learners for enc in encoders]
-    todo = [c for c in cells if c not in done]
-    if done:
-        log.info("resuming: %d of %d cells already done in %s", len(cells) - len(todo),
-                 len(cells), results_path)
+    plan = [(config, cells)]
+    for w in (True, False):
+        for d in sizes:
+            plan.append(({**config, "n_atoms": d, "whiten": w}, list(FIGURE5_COMBINATIONS)))
+    results_path = out / "results.jsonl"
+    total = sum(len(c) for _, c in plan)
+    finished = 0
+    for cfg, cs in plan:
+        done = _done_cells(results_path, _config_key(cfg))
+        finished += sum(c in done for c in cs)
+    if finished:
+        log.info("resuming: %d of %d cells already done in %s", finished, total, results_path)
     t0 = time.perf_counter()
-    with tqdm(total=len(cells), initial=len(cells) - len(todo), desc="recognition cells",
+    computed = []
+    by_config = []
+    with tqdm(total=total, initial=finished, desc="recognition cells",
               disable=not progress) as bar:
-        if todo:
-            bar.set_postfix_str(f"{todo[0][0]}-{todo[0][1]}")
-        records = nested_cv_cells(
-            data, todo, split=split, n_folds=n_folds, inner_folds=inner_folds, C_grid=C_grid,
-            n_atoms=n_atoms, whiten=whiten, n_patches=n_patches, extra=extra,
-            random_state=random_state, n_jobs=n_jobs,
-            representation_dir=out / "representations" / key,
-        )
-        for i, rec in enumerate(records):
-            rec["config_key"] = key
-            for f in rec["folds"]:
-                f.pop("predictions", None)
-            with results_path.open("a") as fh:
-                fh.write(json.dumps(rec) + "\n")
-            done[(rec["learner"], rec["encoder"])] = rec
-            bar.update(1)
-            if i + 1 < len(todo):
-                bar.set_postfix_str(f"{todo[i + 1][0]}-{todo[i + 1][1]}")
+        for cfg, cs in plan:
+            records, todo = _run_config(data, out, cfg, cs, extra, n_jobs, bar)
+            by_config.append(records)
+            computed.extend(records[c] for c in todo)
+    table = by_config[0]
     summary = {
         "config": config,
+        "key": _config_key(config),
         "machine": {"platform": platform.platform(), "processor": platform.processor(),
                     "python": platform.python_version()},
         "seconds_this_run": time.perf_counter() - t0,
-        "cpu_seconds_this_run": float(sum(done[c].get("cpu_seconds", 0.0) for c in todo)),
+        "cpu_seconds_this_run": float(sum(r.get("cpu_seconds", 0.0) for r in computed)),
         "n_jobs": n_jobs,
-        "cells": [done[c] for c in cells],
+        "cells": [table[c] for c in cells],
     }
+    if sizes:
+        summary["figure5"] = [
+            {"learner": lrn, "encoder": enc, "n_atoms": cfg["n_atoms"], "whiten": cfg["whiten"],
+             "accuracy": r["accuracy"], "std": r["std"], "cpu_seconds": r.get("cpu_seconds"),
+             "config_key": r["config_key"]}
+            for (cfg, _), records in zip(plan[1:], by_config[1:], strict=True)
+            for (lrn, enc), r in records.items()
+        ]
     (out / "recognition.json").write_text(json.dumps(summary, indent=2))
     (out / "table1.md").write_text(table1_markdown(summary["cells"]))
-    if figure5_sizes:
-        plot_figure5(data, out / "figure5.png", sizes=figure5_sizes, split=split,
-                     n_folds=n_folds, inner_folds=inner_folds, C_grid=C_grid,
-                     n_patches=n_patches, random_state=random_state, n_jobs=n_jobs,
-                     cache=out / "figure5.jsonl")
+    if sizes:
+        (out / "figure5.md").write_text(figure5_markdown(summary["figure5"]))
+        plot_figure5(summary["figure5"], out / "figure5.png")
     return summary
 
 
@@ -630,45 +684,59 @@ def table1_markdown(cells: Sequence[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_figure5(
-    data: RecognitionData,
-    path,
-    sizes: Sequence[int] = (50, 100, 200, 300, 400),
-    combinations=FIGURE5_COMBINATIONS,
-    cache=None,
-    **cell_kwargs,
-):
+def _figure5_grid(points):
+    pts = {(p["learner"], p["encoder"], int(p["n_atoms"]), bool(p["whiten"])): p
+           for p in points}
+    sizes = sorted({k[2] for k in pts})
+    combos = list(dict.fromkeys((k[0], k[1]) for k in pts))
+    return pts, sizes, combos
+
+
+def figure5_markdown(points: Sequence[dict]) -> str:
+    """Figure 5's points as a Markdown table: combinations x dictionary sizes, +- whitening."""
+    if not points:
+        raise ValueError("no figure 5 points to tabulate")
+    pts, sizes, combos = _figure5_grid(points)
+    lines = ["| combination | whitening | " + " | ".join(f"d = {d}" for d in sizes) + " |",
+             "|---|---|" + "---|" * len(sizes)]
+    for lrn, enc in combos:
+        for w in (True, False):
+            row = []
+            for d in sizes:
+                p = pts.get((lrn, enc, d, w))
+                row.append("" if p is None else
+                           f"{100 * p['accuracy']:.2f} ± {100 * p['std']:.2f}")
+            lines.append(f"| {lrn}-{enc} | {'yes' if w else 'no'} | " + " | ".join(row) + " |")
+    lines.append("")
+    lines.append("Recognition accuracy per rectangle (%), mean ± std over the outer folds of "
+                 "nested cross-validation, against the number of atoms (the paper's Figure 5).")
+    return "\n".join(lines) + "\n"
+
+
+def plot_figure5(points: Sequence[dict], path) -> Path:
     """Accuracy against dictionary size, with and without whitening (the paper's Figure 5).
 
-    Each point is a nested-CV cell; finished points are appended to ``cache`` (JSONL) and reused.
+    Parameters
+    ----------
+    points : sequence of dict
+        One per (learner, encoder, n_atoms, whiten), with its ``accuracy`` (as in
+        ``recognition.json``'s ``"figure5"``).
+    path : path of the PNG written
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cache = Path(cache) if cache is not None else None
-    points = {(r["learner"], r["encoder"], r["n_atoms"], r["whiten"]): r["accuracy"]
-              for r in (read_jsonl(cache) if cache is not None else [])}
-    for lrn, enc in combinations:
-        for whiten in (True, False):
-            for d in sizes:
-                k = (lrn, enc, int(d), whiten)
-                if k in points:
-                    continue
-                rec = nested_cv_cell(data, lrn, enc, n_atoms=int(d), whiten=whiten,
-                                     **cell_kwargs)
-                points[k] = rec["accuracy"]
-                if cache is not None:
-                    with cache.open("a") as fh:
-                        fh.write(json.dumps({"learner": lrn, "encoder": enc, "n_atoms": int(d),
-                                             "whiten": whiten, "accuracy": rec["accuracy"]})
-                                 + "\n")
+    if not points:
+        raise ValueError("no figure 5 points to plot")
+    pts, sizes, combos = _figure5_grid(points)
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for ax, whiten in zip(axes, (True, False), strict=True):
-        for lrn, enc in combinations:
-            ys = [100 * points[(lrn, enc, int(d), whiten)] for d in sizes]
-            ax.plot(sizes, ys, marker="o", label=f"{lrn}-{enc}")
+        for lrn, enc in combos:
+            xs = [d for d in sizes if (lrn, enc, d, whiten) in pts]
+            ys = [100 * pts[(lrn, enc, d, whiten)]["accuracy"] for d in xs]
+            ax.plot(xs, ys, marker="o", label=f"{lrn}-{enc}")
         ax.set_title("with whitening" if whiten else "without whitening")
         ax.set_xlabel("dictionary size (atoms)")
         ax.grid(alpha=0.3)

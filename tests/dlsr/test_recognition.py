@@ -187,6 +187,50 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
     assert fitted == ["NKM", "NKM"]
 
 
+def test_figure5_points_are_cells_that_resume_and_reuse_the_table(separable, tmp_path,
+                                                                   monkeypatch):
+    combos = (("NKM", "Natural"), ("RP", "Natural"))
+    monkeypatch.setattr(rec, "FIGURE5_COMBINATIONS", combos)
+    calls = []
+    real_fold = rec._learner_fold
+
+    def counting(*a, **k):
+        rep = a[3]
+        calls.append((rep.learner, rep.dictionary.shape[0], rep.zca_matrix is not None))
+        return real_fold(*a, **k)
+
+    monkeypatch.setattr(rec, "_learner_fold", counting)
+    kw = dict(learners=["NKM"], encoders=["Natural"], split="image", n_folds=2, inner_folds=2,
+              random_state=0, progress=False, figure5_sizes=(6, 12), **SMALL)
+    first = rec.run_recognition_benchmark(separable, tmp_path, **kw)
+    points = {(p["learner"], p["encoder"], p["n_atoms"], p["whiten"]): p
+              for p in first["figure5"]}
+    assert set(points) == {(lrn, enc, d, w) for lrn, enc in combos for d in (6, 12)
+                           for w in (True, False)}
+    # the table's cell (12 atoms, whitened) is the figure's point, computed once
+    table_cell = first["cells"][0]
+    assert points[("NKM", "Natural", 12, True)]["accuracy"] == table_cell["accuracy"]
+    assert points[("NKM", "Natural", 12, True)]["config_key"] == first["key"]
+    assert calls.count(("NKM", 12, True)) == 2
+    assert calls.count(("NKM", 12, False)) == 2 and calls.count(("RP", 6, False)) == 2
+    assert len(calls) == 2 * 8  # eight (learner, size, whitening) configurations, 2 folds
+    assert points[("NKM", "Natural", 6, False)]["config_key"] != points[
+        ("NKM", "Natural", 6, True)]["config_key"]
+    assert (tmp_path / "figure5.png").stat().st_size > 0
+    md = (tmp_path / "figure5.md").read_text()
+    assert "| NKM-Natural | no |" in md and "d = 6" in md and "d = 12" in md
+    saved = json.loads((tmp_path / "recognition.json").read_text())
+    assert len(saved["figure5"]) == 8
+    # a rerun computes nothing and gives the same points
+    calls.clear()
+    again = rec.run_recognition_benchmark(separable, tmp_path, **kw)
+    assert calls == []
+    assert again["figure5"] == first["figure5"]
+    assert again["cpu_seconds_this_run"] == 0.0
+    with pytest.raises(ValueError, match="sizes must be positive"):
+        rec.run_recognition_benchmark(separable, tmp_path, **{**kw, "figure5_sizes": (0, 6)})
+
+
 def test_cells_together_equal_cells_alone(separable):
     """Scheduling several cells together, sharing a learner's codes, changes no cell's result."""
     kw = dict(split="image", n_folds=3, inner_folds=2, random_state=0, **SMALL)
