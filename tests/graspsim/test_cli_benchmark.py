@@ -31,6 +31,26 @@ def test_recognition_benchmark_cli_writes_and_resumes(tmp_path, box_samples, cap
     assert (out / "results.jsonl").read_text() == before
 
 
+def test_recognition_benchmark_cli_asks_for_figure5(tmp_path, box_samples, monkeypatch, capsys):
+    import dlsr.recognition
+
+    root = write_cornell(box_samples(4), tmp_path / "cornell")
+    seen = []
+
+    def fake_run(data, out, **kw):
+        seen.append(kw)
+        return {"cells": [], "seconds_this_run": 0.0}
+
+    monkeypatch.setattr(dlsr.recognition, "run_recognition_benchmark", fake_run)
+    base = ["benchmark", "recognition", "--data", str(root), "--format", "cornell", "--out",
+            str(tmp_path / "o")]
+    assert main(base + ["--figure5", "--no-whiten"]) == 0
+    assert main(base) == 0
+    assert seen[0]["figure5_sizes"] == (50, 100, 200, 300, 400)
+    assert seen[0]["whiten"] is False
+    assert seen[1]["figure5_sizes"] is None and seen[1]["whiten"] is True
+
+
 def test_recognition_benchmark_cli_bad_input(tmp_path, capsys):
     code = main(["benchmark", "recognition", "--data", str(tmp_path / "nope"), "--format",
                  "cornell", "--out", str(tmp_path / "o")])
