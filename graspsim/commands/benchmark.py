@@ -56,7 +56,9 @@ def _recognition(args: argparse.Namespace) -> int:
         extra_patches=args.extra_patches, max_rectangles=args.max_rectangles,
         figure5=args.figure5, n_jobs=args.jobs, seed=args.seed, out=args.out,
     )
-    print(f"wrote {args.out}/recognition.json and table1.md "
+    extra = (f", figure5.md and figure5.png ({len(summary['figure5'])} points)"
+             if "figure5" in summary else "")
+    print(f"wrote {args.out}/recognition.json and table1.md{extra} "
           f"({len(summary['cells'])} cells, {summary['seconds_this_run']:.0f} s this run)")
     return 0
 
