@@ -62,6 +62,13 @@ class RunConfig:
         Dense detector: the best candidates rescored exactly.
     detection_images : int or None
         At most this many labelled images in the detection cross-validation (None: all).
+    fit_grid : float or None
+        Detector training beyond the paper (as ``graspsim benchmark detection --fit-grid``):
+        the candidate grid restricted to the training positives' sizes between this quantile
+        and its complement. None: the paper's grid.
+    hard_negatives, hard_rounds : int
+        Detector training beyond the paper: negatives mined per training image from the
+        detector's own best failing candidates, in ``hard_rounds`` rounds (0: none, the paper).
     trials : int
         Simulated grasp trials per detector on the test objects.
     trial_candidates : int
@@ -87,6 +94,9 @@ class RunConfig:
     coarse_to_fine: bool = True
     rescore: int = 50
     detection_images: int | None = None
+    fit_grid: float | None = None
+    hard_negatives: int = 0
+    hard_rounds: int = 1
     trials: int = 100
     trial_candidates: int = 32
     baselines: list[str] = field(default_factory=lambda: ["mask-pca", "random", "oracle"])
@@ -106,6 +116,12 @@ class RunConfig:
         for name in ("scenes", "candidates", "n_atoms", "n_patches", "folds", "trials"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.hard_negatives < 0 or self.hard_rounds < 0:
+            raise ValueError(f"hard_negatives and hard_rounds must be >= 0, got "
+                             f"{self.hard_negatives} and {self.hard_rounds}")
+        if self.fit_grid is not None and not 0.0 <= self.fit_grid < 0.5:
+            raise ValueError(f"fit_grid must be a quantile in [0, 0.5) or None, got "
+                             f"{self.fit_grid}")
         if self.scenes < self.folds:
             raise ValueError(f"{self.folds} folds need at least {self.folds} scenes")
         return self
@@ -186,6 +202,14 @@ class _Stages:
         tmp.replace(self.path)
 
 
+def _recorded_config(recorded):
+    """A recorded configuration with the settings added since it was written at their defaults."""
+    try:
+        return json.loads(json.dumps(asdict(RunConfig(**recorded))))
+    except TypeError:  # a setting this version does not know: another configuration
+        return recorded
+
+
 def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
             progress: bool = True) -> Path:
     """Run (or continue) the end-to-end job and return the report's path.
@@ -213,7 +237,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         old = json.loads(run_json.read_text())
         if not resume:
             raise ValueError(f"{root} already holds a run: use --resume {root} or a new --out")
-        if old.get("config") != json.loads(json.dumps(cfg)):
+        if _recorded_config(old.get("config")) != json.loads(json.dumps(cfg)):
             raise ValueError(f"{root} holds a run of another configuration ({run_json}); "
                              "use a new --out")
         log.info("continuing the run in %s", root)
@@ -275,7 +299,8 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
             detector=config.detector, n_folds=config.folds, n_atoms=config.n_atoms,
             n_patches=config.n_patches, seed=seeds["detection"], progress=progress,
             coarse_to_fine=config.coarse_to_fine, rescore=config.rescore,
-            max_images=config.detection_images, executor=ex,
+            max_images=config.detection_images, fit_grid=config.fit_grid,
+            hard_negatives=config.hard_negatives, hard_rounds=config.hard_rounds, executor=ex,
         )
         stages.finish("detection", {
             k: det.get(k) for k in ("accuracy", "baselines", "seconds_per_image")
@@ -289,7 +314,9 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         t0 = time.perf_counter()
         model = train_detector(samples, learner=config.learner, encoder=config.encoder,
                                C=config.C, n_atoms=config.n_atoms, n_patches=config.n_patches,
-                               random_state=seeds["model"], detector=config.detector)
+                               random_state=seeds["model"], detector=config.detector,
+                               fit_grid=config.fit_grid, hard_negatives=config.hard_negatives,
+                               hard_rounds=config.hard_rounds)
         model_path.parent.mkdir(parents=True, exist_ok=True)
         paths = model.save(model_path)
         stages.finish("model", {"paths": [str(p) for p in paths],

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.sim
 TINY = {
     "name": "tiny", "scenes": 6, "candidates": 12, "n_atoms": 8, "n_patches": 6000, "folds": 2,
     "inner_folds": 2, "trials": 3, "trial_candidates": 8, "baselines": ["mask-pca"],
-    "detection_images": 4, "jobs": 1,
+    "detection_images": 4, "jobs": 1, "fit_grid": 0.05, "hard_negatives": 2,
 }
 
 
@@ -42,6 +42,11 @@ def test_run_writes_every_stage_and_the_report(tiny_run):
         assert len((out / "trials" / name / "trials.jsonl").read_text().splitlines()) == 3
     run = json.loads((out / "run.json").read_text())
     assert run["config"]["scenes"] == 6 and "numpy" in run["versions"]
+    # the detector training options reach the detection benchmark and the final model
+    det = json.loads((out / "detection" / "detection.json").read_text())
+    assert (det["config"]["fit_grid"], det["config"]["hard_negatives"]) == (0.05, 2)
+    model = json.loads((out / "model" / "dlsr.json").read_text())
+    assert (model["config"]["fit_grid"], model["config"]["hard_negatives"]) == (0.05, 2)
     md = report.read_text()
     assert "Physical grasp success" in md and "| dlsr |" in md and "| mask-pca |" in md
     html = (out / "report.html").read_text()
@@ -82,10 +87,19 @@ def test_interrupted_trials_continue(tiny_run, tmp_path):
     assert strip == [{k: v for k, v in r.items() if k != "seconds"} for r in first]
 
 
-def test_other_configuration_in_the_same_folder_is_refused(tiny_run):
+def test_other_configuration_in_the_same_folder_is_refused(tiny_run, tmp_path, monkeypatch):
     out, _ = tiny_run
     with pytest.raises(ValueError, match="another configuration"):
         pipeline.run_job(pipeline.load_config(**{**TINY, "seed": 1}), out=out, progress=False)
+    # a run recorded before a setting existed resumes, the setting at its default
+    copy = tmp_path / "older"
+    shutil.copytree(out, copy)
+    run = json.loads((copy / "run.json").read_text())
+    run["config"] = {k: v for k, v in run["config"].items() if k != "hard_rounds"}
+    (copy / "run.json").write_text(json.dumps(run))
+    monkeypatch.setattr("graspsim.trials.run_trials", lambda *a, **k: (_ for _ in ()).throw(
+        AssertionError("a finished stage was run again")))
+    assert pipeline.resume_job(copy, progress=False).exists()
 
 
 def test_config_files_and_bad_settings(tmp_path):
@@ -99,6 +113,10 @@ def test_config_files_and_bad_settings(tmp_path):
         pipeline.load_config(tmp_path / "bad.toml")
     with pytest.raises(ValueError, match="learner"):
         pipeline.load_config(learner="KSVD")
+    with pytest.raises(ValueError, match="hard_negatives"):
+        pipeline.load_config(hard_negatives=-1)
+    with pytest.raises(ValueError, match="fit_grid"):
+        pipeline.load_config(fit_grid=0.7)
     with pytest.raises(FileNotFoundError):
         pipeline.load_config(tmp_path / "absent.toml")
     assert main(["run", "--resume", str(tmp_path / "nothing")]) == 2
