@@ -527,9 +527,12 @@ def _run_config(data, out: Path, config: dict, cells, extra, n_jobs, bar) -> tup
     results_path = out / "results.jsonl"
     done = _done_cells(results_path, key)
     todo = [c for c in cells if c not in done]
+    def label(cell):
+        return (f"{cell[0]}-{cell[1]} d={config['n_atoms']}"
+                + ("" if config["whiten"] else " unwhitened"))
+
     if todo:
-        bar.set_postfix_str(f"{todo[0][0]}-{todo[0][1]} d={config['n_atoms']}"
-                            + ("" if config["whiten"] else " unwhitened"))
+        bar.set_postfix_str(label(todo[0]))
         records = nested_cv_cells(
             data, todo, split=config["split"], n_folds=config["n_folds"],
             inner_folds=config["inner_folds"], C_grid=config["C_grid"],
@@ -545,6 +548,9 @@ def _run_config(data, out: Path, config: dict, cells, extra, n_jobs, bar) -> tup
                 fh.write(json.dumps(rec) + "\n")
             done[(rec["learner"], rec["encoder"])] = rec
             bar.update(1)
+            pending = [c for c in todo if c not in done]
+            if pending:
+                bar.set_postfix_str(label(pending[0]))
     return {c: done[c] for c in cells}, todo
 
 
@@ -597,7 +603,7 @@ def run_recognition_benchmark(
     if len(data) == 0:
         raise ValueError("the dataset has no rectangles")
     _check_both_classes(data.labels, "the dataset")
-    sizes = [int(d) for d in figure5_sizes] if figure5_sizes else []
+    sizes = list(dict.fromkeys(int(d) for d in figure5_sizes)) if figure5_sizes else []
     if any(d < 1 for d in sizes):
         raise ValueError(f"figure 5 dictionary sizes must be positive, got {list(figure5_sizes)}")
     config = {

@@ -227,6 +227,10 @@ def test_figure5_points_are_cells_that_resume_and_reuse_the_table(separable, tmp
     assert calls == []
     assert again["figure5"] == first["figure5"]
     assert again["cpu_seconds_this_run"] == 0.0
+    # sizes in another order, one repeated: the same points, once each
+    shuffled = rec.run_recognition_benchmark(separable, tmp_path,
+                                             **{**kw, "figure5_sizes": (12, 6, 12)})
+    assert calls == [] and len(shuffled["figure5"]) == 8
     with pytest.raises(ValueError, match="sizes must be positive"):
         rec.run_recognition_benchmark(separable, tmp_path, **{**kw, "figure5_sizes": (0, 6)})
 
