@@ -107,6 +107,7 @@ __all__ = [
     "fit_search_grid",
     "sample_observation",
     "mine_hard_negatives",
+    "check_training_options",
     "object_region",
     "table_plane_mask",
     "background_mask",
@@ -755,6 +756,24 @@ def detection_training_data(samples, grid_negatives: float = 1.0,
                             extra_negatives=extra)
 
 
+def _check_quantile(q, name: str) -> None:
+    if not 0 <= q < 0.5:
+        raise ValueError(f"{name} must be in [0, 0.5), got {q}")
+
+
+def check_training_options(fit_grid=None, hard_negatives=0, hard_rounds=1) -> None:
+    """Clear errors for the detector training options beyond the paper, before any work.
+
+    ``fit_grid`` is None or a quantile in ``[0, 0.5)`` (:func:`fit_search_grid`);
+    ``hard_negatives`` and ``hard_rounds`` are integers >= 0 (:func:`train_detector`).
+    """
+    if fit_grid is not None:
+        _check_quantile(fit_grid, "fit_grid")
+    for name, value in (("hard_negatives", hard_negatives), ("hard_rounds", hard_rounds)):
+        if int(value) != value or value < 0:
+            raise ValueError(f"{name} must be an integer >= 0, got {value}")
+
+
 def fit_search_grid(positives, grid: SearchGrid = PAPER_GRID,
                     quantile: float = 0.025) -> SearchGrid:
     """The search grid restricted to the sizes of the training positives.
@@ -789,8 +808,7 @@ def fit_search_grid(positives, grid: SearchGrid = PAPER_GRID,
     pos = as_rect_array(positives)
     if len(pos) == 0:
         raise ValueError("fit_search_grid needs at least one positive rectangle")
-    if not 0 <= quantile < 0.5:
-        raise ValueError(f"quantile must be in [0, 0.5), got {quantile}")
+    _check_quantile(quantile, "quantile")
 
     def keep(values, x):
         v = np.sort(np.asarray(values, dtype=float))
@@ -883,9 +901,7 @@ def train_detector(
     if encoder_param is None and encoder != "Natural":
         grid = ENCODER_GRIDS[encoder]
         encoder_param = grid[len(grid) // 2 - 1]
-    if int(hard_negatives) != hard_negatives or hard_negatives < 0 or hard_rounds < 0:
-        raise ValueError("hard_negatives and hard_rounds must be integers >= 0, got "
-                         f"{hard_negatives} and {hard_rounds}")
+    check_training_options(fit_grid, hard_negatives, hard_rounds)
     t0 = time.perf_counter()
     sgrid = config.get("grid", PAPER_GRID)
     if isinstance(sgrid, dict):

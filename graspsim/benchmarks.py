@@ -202,7 +202,7 @@ def detection_benchmark(
     from tqdm.auto import tqdm
 
     from dlsr import datasets
-    from dlsr.detection import DLSRDetector, train_detector
+    from dlsr.detection import DLSRDetector, check_training_options, train_detector
     from dlsr.rectangles import as_rect_array
     from dlsr.viz import draw_rectangles
 
@@ -214,8 +214,7 @@ def detection_benchmark(
         raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
     if encoder not in ENCODERS:
         raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
-    if int(hard_rounds) != hard_rounds or hard_rounds < 0:
-        raise ValueError(f"hard_rounds must be an integer >= 0, got {hard_rounds}")
+    check_training_options(fit_grid, hard_negatives, hard_rounds)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     samples = load_samples(data, format, scale, mapping)

@@ -105,6 +105,7 @@ class RunConfig:
     jobs: int = 2
 
     def validated(self) -> RunConfig:
+        from dlsr.detection import check_training_options
         from dlsr.features import ENCODERS, LEARNERS
 
         if self.learner not in LEARNERS:
@@ -116,12 +117,7 @@ class RunConfig:
         for name in ("scenes", "candidates", "n_atoms", "n_patches", "folds", "trials"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.hard_negatives < 0 or self.hard_rounds < 0:
-            raise ValueError(f"hard_negatives and hard_rounds must be >= 0, got "
-                             f"{self.hard_negatives} and {self.hard_rounds}")
-        if self.fit_grid is not None and not 0.0 <= self.fit_grid < 0.5:
-            raise ValueError(f"fit_grid must be a quantile in [0, 0.5) or None, got "
-                             f"{self.fit_grid}")
+        check_training_options(self.fit_grid, self.hard_negatives, self.hard_rounds)
         if self.scenes < self.folds:
             raise ValueError(f"{self.folds} folds need at least {self.folds} scenes")
         return self
