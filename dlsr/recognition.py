@@ -505,16 +505,14 @@ def _config_key(config: dict) -> str:
     return hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
 
 
-def _done_cells(results_path: Path, key: str) -> dict:
-    return {(r["learner"], r["encoder"]): r for r in read_jsonl(results_path)
-            if r.get("config_key") == key}
+def _run_config(data, out: Path, config: dict, cells, done: dict, extra, n_jobs,
+                bar) -> tuple[dict, list]:
+    """The cells of one configuration: the finished ones from ``done``, the missing ones computed.
 
-
-def _run_config(data, out: Path, config: dict, cells, extra, n_jobs, bar) -> tuple[dict, list]:
-    """The cells of one configuration: read from ``results.jsonl``, the missing ones computed.
-
-    Each computed cell is appended to ``results.jsonl`` (tagged with the configuration's key) as
-    soon as it finishes; representations go to ``out/representations/<key>/``.
+    ``done`` maps ``(learner, encoder)`` to the records of this configuration already in
+    ``results.jsonl``; it is filled in place. Each computed cell is appended to
+    ``results.jsonl`` (tagged with the configuration's key) as soon as it finishes;
+    representations go to ``out/representations/<key>/``.
 
     Returns
     -------
@@ -525,8 +523,8 @@ def _run_config(data, out: Path, config: dict, cells, extra, n_jobs, bar) -> tup
     """
     key = _config_key(config)
     results_path = out / "results.jsonl"
-    done = _done_cells(results_path, key)
     todo = [c for c in cells if c not in done]
+
     def label(cell):
         return (f"{cell[0]}-{cell[1]} d={config['n_atoms']}"
                 + ("" if config["whiten"] else " unwhitened"))
@@ -618,11 +616,13 @@ def run_recognition_benchmark(
         for d in sizes:
             plan.append(({**config, "n_atoms": d, "whiten": w}, list(FIGURE5_COMBINATIONS)))
     results_path = out / "results.jsonl"
+    done: dict = {}  # configuration key -> {(learner, encoder): record}
+    for r in read_jsonl(results_path):
+        done.setdefault(r.get("config_key"), {})[(r["learner"], r["encoder"])] = r
+    keys = [_config_key(cfg) for cfg, _ in plan]
     total = sum(len(c) for _, c in plan)
-    finished = 0
-    for cfg, cs in plan:
-        done = _done_cells(results_path, _config_key(cfg))
-        finished += sum(c in done for c in cs)
+    finished = sum(c in done.get(k, {}) for k, (_, cs) in zip(keys, plan, strict=True)
+                   for c in cs)
     if finished:
         log.info("resuming: %d of %d cells already done in %s", finished, total, results_path)
     t0 = time.perf_counter()
@@ -630,14 +630,15 @@ def run_recognition_benchmark(
     by_config = []
     with tqdm(total=total, initial=finished, desc="recognition cells",
               disable=not progress) as bar:
-        for cfg, cs in plan:
-            records, todo = _run_config(data, out, cfg, cs, extra, n_jobs, bar)
+        for k, (cfg, cs) in zip(keys, plan, strict=True):
+            records, todo = _run_config(data, out, cfg, cs, done.setdefault(k, {}), extra,
+                                        n_jobs, bar)
             by_config.append(records)
             computed.extend(records[c] for c in todo)
     table = by_config[0]
     summary = {
         "config": config,
-        "key": _config_key(config),
+        "key": keys[0],
         "machine": {"platform": platform.platform(), "processor": platform.processor(),
                     "python": platform.python_version()},
         "seconds_this_run": time.perf_counter() - t0,
