@@ -21,8 +21,8 @@ step of iterative refinement, the correlations are recomputed exactly, and the l
 (KKT) conditions are checked: ``|c_j| <= lam`` off the support, sign agreement on it. A row that
 fails, or exceeds the step limit, is flagged so that the caller solves it another way.
 
-Also here, as the other compiled per-row solve of :mod:`dlsr.coding`: masked OMP's exact
-float64 least squares on each row's selected atoms (:func:`masked_least_squares`).
+Also here, the other compiled per-row solve of :mod:`dlsr.coding`: orthogonal matching pursuit
+with snapshots at several numbers of atoms (:func:`omp_path_rows`), on the same Gram columns.
 
 Compiled with numba (``nogil``, cached on disk): callers run chunks of rows in threads.
 """
@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["lasso_path_rows", "masked_least_squares"]
+__all__ = ["lasso_path_rows", "omp_path_rows"]
 
 
 _FAST = {"reassoc", "contract", "nsz"}  # vectorised sums and FMA; infinities stay exact
@@ -360,54 +360,129 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
             pen[excluded[x]] = 0.0
 
 
-@njit(nogil=True, cache=True)
-def masked_least_squares(slots, D, M, B, out):
-    """Exact masked least squares on each row's selected atoms (masked OMP's coefficients).
+@njit(nogil=True, cache=True, fastmath=_FAST)
+def _refine(k, act, b, Gc, Ginv, coef, res):
+    """One step of iterative refinement of ``coef`` (k selected atoms) with exact Gram entries."""
+    for s in range(k):
+        acc = b[act[s]]
+        for q in range(k):
+            acc -= Gc[q, act[s]] * coef[q]
+        res[s] = acc
+    for s in range(k):
+        acc = 0.0
+        for q in range(k):
+            acc += Ginv[s, q] * res[q]
+        coef[s] += acc
 
-    For row ``i`` with atoms ``S = slots[i][slots[i] >= 0]``, solves
-    ``(D_S diag(m_i) D_S^T) a = B[i, S]`` in float64 and writes ``a`` into ``out[i, S]``.
-    The Gram block is summed over the row's valid entries only.
+
+@njit(nogil=True, cache=True, fastmath=_FAST)
+def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
+    """Orthogonal matching pursuit for every row of ``B``, with snapshots at ``stops`` atoms.
+
+    Per row: select the atom of largest absolute residual correlation, border the inverse of
+    the selected atoms' Gram block (a row stops when the new atom is numerically dependent on
+    the selected ones, ``sigma <= 1e-10 diag``, or when the residual correlation vanishes,
+    ``c_j^2 <= tiny``), solve the least squares on the selected atoms, and update the residual
+    correlations ``c = b - G_S a_S`` (``O(k d)``). All in float64; Gram columns as in the
+    lasso (:func:`_column`: shared, or the row's masked column computed when the atom enters),
+    so masked least squares are exact.
 
     Parameters
     ----------
-    slots : ndarray of shape (r, t), int64
-        Selected atoms per row, ``-1`` for an empty slot.
-    D : ndarray of shape (d, p), float64
-    M : ndarray of shape (r, p), bool
-    B : ndarray of shape (r, d), float64
-        Masked correlations ``D diag(m_i) x_i``.
-    out : ndarray of shape (r, d), float64, zero-initialised, written
+    B : ndarray of shape (n, d), float64
+        Correlations ``D diag(m) x`` per row.
+    G : ndarray of shape (d, d), float64
+        Shared Gram matrix (with ``use_mask``: the unmasked one, or a 1x1 placeholder).
+    Dt : ndarray of shape (p, d), float64
+        Transposed dictionary (used when ``use_mask``).
+    M : ndarray of shape (n, p), float64
+        Per-row masks as 0/1 (used when ``use_mask``).
+    use_mask : bool
+    stops : ndarray of shape (t,), int64
+        Increasing numbers of atoms, each in ``[1, d]``.
+    out : ndarray of shape (t, n, d)
+        Zero-initialised; row ``i``'s solution with ``stops[s]`` atoms goes to ``out[s, i]``
+        (the last solution when the row stopped earlier).
+    tiny : float
     """
-    r, t = slots.shape
-    p = D.shape[1]
-    idx = np.empty(t, dtype=np.int64)
-    valid = np.empty(p, dtype=np.int64)
-    for i in range(r):
+    n, d = B.shape
+    n_stops = stops.shape[0]
+    L = stops[n_stops - 1]
+    Gc = np.empty((L, d))
+    Ginv = np.empty((L, L))
+    act = np.empty(L, dtype=np.int64)
+    coef = np.empty(L)
+    g = np.empty(L)
+    v = np.empty(L)
+    res = np.empty(L)
+    c = np.empty(d)
+    col = np.empty(d)
+    m = np.empty(1)
+    for i in range(n):
+        b = B[i]
+        if use_mask:
+            m = M[i]
+        for a in range(d):
+            c[a] = b[a]
         k = 0
-        for s in range(t):
-            if slots[i, s] >= 0:
-                idx[k] = slots[i, s]
-                k += 1
-        if k == 0:
-            continue
-        nv = 0
-        for q in range(p):
-            if M[i, q]:
-                valid[nv] = q
-                nv += 1
-        G = np.empty((k, k))
-        rhs = np.empty(k)
-        for a in range(k):
-            da = D[idx[a]]
-            for b in range(a + 1):
-                db = D[idx[b]]
-                s = 0.0
-                for v in range(nv):
-                    q = valid[v]
-                    s += da[q] * db[q]
-                G[a, b] = s
-                G[b, a] = s
-            rhs[a] = B[i, idx[a]]
-        coef = np.linalg.solve(G, rhs)
-        for a in range(k):
-            out[i, idx[a]] = coef[a]
+        si = 0
+        for _t in range(L):
+            for s in range(k):  # selected atoms cannot be chosen again
+                c[act[s]] = 0.0
+            bv = 0.0
+            for a in range(d):  # two passes: the maximum vectorises, then its first index
+                bv = max(bv, abs(c[a]))
+            if not bv * bv > tiny:
+                break
+            best = 0
+            while abs(c[best]) != bv:
+                best += 1
+            _column(best, G, Dt, m, use_mask, col)
+            diag = col[best]
+            sigma = diag
+            for s in range(k):
+                g[s] = col[act[s]]
+            for s in range(k):
+                acc = 0.0
+                for q in range(k):
+                    acc += Ginv[s, q] * g[q]
+                v[s] = acc
+                sigma -= g[s] * acc
+            if not (sigma > 1e-10 * max(diag, tiny) and sigma > tiny):
+                break
+            for s in range(k):
+                vs = v[s] / sigma
+                for q in range(k):
+                    Ginv[s, q] += vs * v[q]
+                Ginv[k, s] = -vs
+                Ginv[s, k] = -vs
+            Ginv[k, k] = 1.0 / sigma
+            act[k] = best
+            for a in range(d):
+                Gc[k, a] = col[a]
+            k += 1
+            for s in range(k):
+                acc = 0.0
+                for q in range(k):
+                    acc += Ginv[s, q] * b[act[q]]
+                coef[s] = acc
+            if si < n_stops and stops[si] == k:
+                _refine(k, act, b, Gc, Ginv, coef, res)
+                while si < n_stops and stops[si] == k:
+                    for s in range(k):
+                        out[si, i, act[s]] = coef[s]
+                    si += 1
+            if k < L:
+                for a in range(d):
+                    c[a] = b[a]
+                for s in range(k):
+                    w = coef[s]
+                    for a in range(d):
+                        c[a] -= w * Gc[s, a]
+        # stopped early: later stops keep its last solution (refined once)
+        if si < n_stops and k > 0 and not (si > 0 and stops[si - 1] == k):
+            _refine(k, act, b, Gc, Ginv, coef, res)
+        while si < n_stops:
+            for s in range(k):
+                out[si, i, act[s]] = coef[s]
+            si += 1

@@ -29,11 +29,14 @@ matrix per mask: rows sharing a mask (fully valid patches, padding patterns; at 
 of an entering atom is computed when it enters, from the unmasked Gram matrix minus the
 masked entries' contribution (or the sum over the valid entries when fewer).
 
-OMP is batched over all patches of a chunk (one atom per step for every patch, bordered
-inverses, the Gram columns of the selected atoms kept per patch in float32 for the residual
-correlations; the coefficients are float64 least squares, solved with each row's exact masked
-Gram block for per-row masks). The greedy selection does not depend on the final number of
-atoms, so one run gives every smaller ``L`` of a grid (:func:`omp_path`).
+OMP is compiled per patch too (:func:`dlsr._homotopy.omp_path_rows`): each step selects the
+atom of largest absolute residual correlation, borders the inverse of the selected atoms' Gram
+block, solves the least squares on them and updates the correlations in ``O(k d)``, all in
+float64 with the same Gram columns as the lasso (so masked least squares are exact). The greedy
+selection does not depend on the final number of atoms, so one run gives every smaller ``L`` of
+a grid (:func:`omp_path`). (It replaced a version vectorised over patches with numpy, one step
+for all rows at a time: on 23,104 real patches, d = 300, L up to 15, 1.7x faster unmasked and
+2.4x masked, the same codes.)
 
 Chunks of rows (``chunk_size``, small enough to stay in cache) run in ``n_jobs`` threads with
 single-threaded BLAS (numpy and the compiled kernel release the GIL); the dense encoders split
@@ -57,7 +60,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_array, check_is_fitted, validate_data
-from threadpoolctl import threadpool_limits
+
+from . import _threads
 
 __all__ = [
     "lasso",
@@ -129,75 +133,20 @@ class _SharedGram:
 
     def __init__(self, G):
         self.G64 = np.ascontiguousarray(G, dtype=np.float64)
-        self.G32 = self.G64.astype(np.float32)
-        self.diag = np.diag(self.G64).copy()
 
     def subset(self, rows):  # noqa: ARG002 - same operator for every row
         return self
 
-    def columns(self, j):
-        """Gram columns ``G[:, j_r]`` for each row r, shape (r, d), float64."""
-        return self.G64[j]
-
-    def columns32(self, j):
-        return self.G32[j]
-
-    def entries(self, j, slots, col32):  # noqa: ARG002
-        """Exact Gram entries ``G[j_r, s]`` for the atoms in ``slots`` (r, t), float64."""
-        return self.G64[j[:, None], slots]
-
-    def apply(self, W, exact=False):
-        """``G w_r`` for each row, shape (r, d); float64 when exact, else float32."""
-        if exact:
-            return np.asarray(W, dtype=np.float64) @ self.G64
-        return np.asarray(W, dtype=np.float32) @ self.G32
-
-    def gram_diag(self, j):
-        return self.diag[j]
-
 
 class _MaskedGram:
-    """Each row r has its own ``G_r = D diag(m_r) D^T``; never formed."""
+    """Each row r has its own ``G_r = D diag(m_r) D^T``; never formed (the compiled solvers
+    compute the masked Gram column of each atom they select)."""
 
-    def __init__(self, D, M):
-        self.D64 = np.ascontiguousarray(D, dtype=np.float64)
-        self.D32 = self.D64.astype(np.float32)
+    def __init__(self, M):
         self.M = M
 
     def subset(self, rows):
-        out = _MaskedGram.__new__(_MaskedGram)
-        out.D64, out.D32, out.M = self.D64, self.D32, self.M[rows]
-        return out
-
-    def columns(self, j):
-        return self.columns32(j).astype(np.float64)
-
-    def columns32(self, j):
-        Dj = self.D32[j] * self.M
-        return Dj @ self.D32.T
-
-    def entries(self, j, slots, col32):  # noqa: ARG002
-        """Gram entries from the float32 columns (refined by the callers)."""
-        return np.take_along_axis(col32, slots, axis=1).astype(np.float64)
-
-    def apply(self, W, exact=False):
-        if exact:
-            return ((np.asarray(W, dtype=np.float64) @ self.D64) * self.M) @ self.D64.T
-        W = np.asarray(W, dtype=np.float32)
-        return ((W @ self.D32) * self.M) @ self.D32.T
-
-    def gram_diag(self, j):
-        Dj = self.D64[j]
-        return np.einsum("rp,rp->r", Dj * self.M, Dj)
-
-
-def _scatter(slots_atoms, values, d, dtype=np.float64):
-    """Dense C-contiguous (r, d) from per-slot atoms (``-1`` = empty slot) and values."""
-    r = slots_atoms.shape[0]
-    W = np.zeros((r, d), dtype=dtype)
-    ri, si = np.nonzero(slots_atoms >= 0)
-    W[ri, slots_atoms[ri, si]] = values[ri, si]
-    return W
+        return _MaskedGram(self.M[rows])
 
 
 # --------------------------------------------------------------------------------------------
@@ -297,7 +246,7 @@ def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None, n_path
         for sl in _chunks(rows.size, chunk_size):
             tasks.append((rows[sl], op))
     if rest.size:
-        mop = _MaskedGram(D64, mask)
+        mop = _MaskedGram(mask)
         for sl in _chunks(rest.size, chunk_size):
             tasks.append((rest[sl], mop.subset(rest[sl])))
 
@@ -309,7 +258,7 @@ def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None, n_path
             out[:, idx] = solver(idx, op)
 
     workers = min(_n_workers(n_jobs), max(len(tasks), 1))
-    with threadpool_limits(limits=1):  # small products: threaded BLAS only adds overhead
+    with _threads.limit(1):  # small products: threaded BLAS only adds overhead
         if workers == 1:
             for task in tasks:
                 run(task)
@@ -407,11 +356,10 @@ def lasso_path(
             for t, lam_t in enumerate(levels):
                 A[t, bad] = lasso_rowwise(
                     X64[rows], D64, lam_t, None if mask is None else mask[rows])
-        return A
+        return A[where]  # the requested order, per chunk (no copy of the whole output)
 
-    A = _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
-                      n_paths=levels.size, dtype=dtype)
-    return A[where]
+    return _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
+                         n_paths=where.size, dtype=dtype)
 
 
 def lasso(
@@ -523,97 +471,7 @@ def omp_rowwise(X, D, n_nonzero, mask=None):
 
 
 # --------------------------------------------------------------------------------------------
-# OMP: batched, one atom per step for every row
-
-
-def _omp_batch(B, stops, op, exact_ls):
-    """OMP on Gram operators with snapshots.
-
-    ``B`` (r, d) correlations; ``stops`` increasing numbers of atoms. Returns
-    (len(stops), r, d) float64 codes: OMP's greedy selection does not depend on the final
-    number of atoms, so the solution with ``L`` atoms is the least-squares fit on the first
-    ``L`` atoms selected by any longer run.
-    """
-    from dlsr._homotopy import masked_least_squares
-
-    r, d = B.shape
-    stops = [min(int(s), d) for s in stops]
-    out = np.zeros((len(stops), r, d))
-    if r == 0:
-        return out
-    rr = np.arange(r)
-    if stops[-1] == 1:
-        j = np.argmax(np.abs(B), axis=1)
-        diag = op.gram_diag(j)
-        good = (B[rr, j] ** 2 > _TINY) & (diag > _TINY)
-        out[:, rr[good], j[good]] = B[rr[good], j[good]] / diag[good]
-        return out
-    L = stops[-1]
-    slots = np.full((r, L), -1, dtype=np.int64)
-    Ginv = np.zeros((r, L, L))
-    cols = np.zeros((r, L, d), dtype=np.float32)
-    coef = np.zeros((r, L))
-    live = np.ones(r, dtype=bool)
-    B32 = B.astype(np.float32)
-    c = B32.copy()
-    rc = rr[:, None]
-
-    def snapshot(t1):
-        """Codes on the first ``t1`` selected atoms.
-
-        With ``exact_ls`` (per-row masks, whose Gram entries came from float32 columns) the
-        least squares is solved again with the exact float64 masked Gram block of each row.
-        """
-        sl = slots[:, :t1]
-        if not exact_ls or t1 == 0:
-            return _scatter(sl, coef[:, :t1], d)
-        W = np.zeros((r, d))
-        masked_least_squares(np.ascontiguousarray(sl), op.D64, op.M, B, W)  # compiled
-        return W
-
-    for t in range(L):
-        cabs = np.abs(c)
-        if t:
-            cabs[rc, slots[:, :t]] = 0.0
-        j = np.argmax(cabs, axis=1)
-        live &= cabs[rr, j].astype(np.float64) ** 2 > _TINY
-        if not live.any():
-            break
-        col = op.columns32(j)  # (r, d) float32
-        diag = op.gram_diag(j)
-        if t:
-            g = op.entries(j, np.maximum(slots[:, :t], 0), col)
-            Gi = Ginv[:, :t, :t]
-            v = np.matmul(Gi, g[:, :, None])[:, :, 0]
-            sigma = diag - np.einsum("rk,rk->r", g, v)
-        else:
-            sigma = diag
-        ok = live & (sigma > 1e-10 * np.maximum(diag, _TINY)) & (sigma > _TINY)
-        live = ok  # a dependent atom stops the row (as scikit-learn)
-        sg = np.where(ok, sigma, 1.0)
-        if t:
-            v[~ok] = 0.0
-            vs = v / sg[:, None]
-            Gi += v[:, :, None] * vs[:, None, :]
-            Ginv[:, t, :t] = -vs
-            Ginv[:, :t, t] = -vs
-        Ginv[:, t, t] = np.where(ok, 1.0 / sg, 0.0)
-        slots[:, t] = np.where(ok, j, -1)
-        cols[:, t] = col
-        BA = np.where(slots[:, : t + 1] >= 0, B[rc, np.maximum(slots[:, : t + 1], 0)], 0.0)
-        coef[:, : t + 1] = np.matmul(Ginv[:, : t + 1, : t + 1], BA[:, :, None])[:, :, 0]
-        for s_i, stop in enumerate(stops):
-            if stop == t + 1:
-                out[s_i] = snapshot(t + 1)
-        if t + 1 < L:
-            fit = np.matmul(coef[:, None, : t + 1].astype(np.float32), cols[:, : t + 1])
-            np.subtract(B32, fit[:, 0], out=c)
-    else:
-        return out
-    for s_i, stop in enumerate(stops):  # every row stopped early: later stops are the same
-        if stop > t:
-            out[s_i] = snapshot(t)
-    return out
+# OMP: compiled per row (dlsr._homotopy.omp_path_rows) with snapshots at every requested L
 
 
 def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP,
@@ -643,18 +501,29 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
             or np.any(Ls != np.round(Ls)) or np.any(Ls < 1)):
         raise ValueError(f"n_nonzero must be positive integers, got {n_nonzeros!r}")
     stops, where = np.unique(Ls.astype(np.int64), return_inverse=True)
+    where = where.ravel()
+    from dlsr._homotopy import omp_path_rows
+
     X64 = np.asarray(X, dtype=np.float64)
-    D64 = np.asarray(D, dtype=np.float64)
-    D64t = np.ascontiguousarray(D64.T)
+    D64 = np.ascontiguousarray(D, dtype=np.float64)
+    Dt = np.ascontiguousarray(D64.T)
     Xm = X64 * mask if mask is not None else X64
+    G_full = D64 @ D64.T if mask is not None else None
+    stops_c = np.minimum(stops, D64.shape[0]).astype(np.int64)
+    no_M = np.zeros((1, 1))
 
     def solver(idx, op):
-        B = Xm[idx] @ D64t
-        return _omp_batch(B, stops.tolist(), op, exact_ls=isinstance(op, _MaskedGram))
+        B = np.ascontiguousarray(Xm[idx] @ Dt)
+        A = np.zeros((stops_c.size, idx.size, D64.shape[0]))
+        if isinstance(op, _SharedGram):
+            omp_path_rows(B, op.G64, Dt, no_M, False, stops_c, A, _TINY)
+        else:
+            M = np.ascontiguousarray(op.M, dtype=np.float64)
+            omp_path_rows(B, G_full, Dt, M, True, stops_c, A, _TINY)
+        return A[where]  # the requested order, per chunk
 
-    A = _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
-                      n_paths=stops.size, dtype=dtype)
-    return A[where.ravel()]
+    return _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
+                         n_paths=where.size, dtype=dtype)
 
 
 def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP,
@@ -696,13 +565,6 @@ def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=M
 # dense encoders
 
 
-def _blas_threads():
-    from threadpoolctl import threadpool_info
-
-    return max([i.get("num_threads", 1) for i in threadpool_info()
-                if i.get("user_api") == "blas"] or [1])
-
-
 def _dense_chunks(X, n_out, fn, chunk_size, dtype):
     """``fn(x, out)`` over row chunks, in as many threads as BLAS may use (1 BLAS thread each).
 
@@ -725,12 +587,12 @@ def _dense_chunks(X, n_out, fn, chunk_size, dtype):
         if not np.isfinite(check) and not np.all(np.isfinite(X[sl])):
             raise ValueError("X must be finite (no NaN or inf)")
 
-    workers = min(_blas_threads(), len(slices)) if len(slices) > 1 else 1
+    workers = min(_threads.blas_threads(), len(slices)) if len(slices) > 1 else 1
     if workers <= 1:
         for sl in slices:
             run(sl)
         return out
-    with threadpool_limits(limits=1), ThreadPoolExecutor(workers) as pool:
+    with _threads.limit(1), ThreadPoolExecutor(workers) as pool:
         list(pool.map(run, slices))
     return out
 

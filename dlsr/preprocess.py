@@ -59,7 +59,6 @@ Departures from the reference (named options)
 
 from __future__ import annotations
 
-import functools
 import logging
 
 import cv2
@@ -67,6 +66,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import Delaunay, QhullError
 
+from . import _threads
 from .datasets import GraspSample
 from .rectangles import GraspRectangle, as_rect_array, normalize_angle
 
@@ -98,13 +98,6 @@ _FILLS = ("band", "griddata", "nearest")
 _ONE = 1.0 - 1e-6  # bilinear weights summing to one, up to float32 rounding
 
 
-@functools.cache
-def _threadpools():
-    from threadpoolctl import ThreadpoolController
-
-    return ThreadpoolController()
-
-
 def _one_blas_thread():
     """Context manager: BLAS and LAPACK limited to one thread inside (threadpoolctl).
 
@@ -114,7 +107,7 @@ def _one_blas_thread():
     Python thread at a time control OpenBLAS: called in another thread meanwhile, this changes
     nothing and that thread's limits apply (the detectors set them in the calling thread).
     """
-    return _threadpools().limit(limits=1, user_api="blas")
+    return _threads.limit(1, user_api="blas")
 
 
 # ---------------------------------------------------------------------------------------------

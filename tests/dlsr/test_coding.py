@@ -319,6 +319,33 @@ def test_omp_path_equals_separate_runs(real_patches, masked):
         np.testing.assert_allclose(P[2], _sk_omp(X, D, 5), atol=1e-5, rtol=1e-4)
 
 
+@pytest.mark.parametrize("masked", [False, True])
+def test_omp_stops_early_on_dependent_atoms_and_exhausted_residuals(masked):
+    """A rank-4 dictionary with a repeated atom: no row can use more than 4 atoms, a zero row
+    gets no atom, a row equal to an atom is coded by that atom, and every longer L repeats the
+    last solution; the codes are scikit-learn's."""
+    rng = np.random.default_rng(3)
+    D = rng.standard_normal((5, 4))
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    D = np.vstack([D, D[2]])  # repeated atom: 6 atoms spanning 4 dimensions
+    X = np.vstack([rng.standard_normal((20, 4)), np.zeros(4), 2.5 * D[1]])
+    M = np.ones_like(X, dtype=bool) if masked else None
+    Ls = [1, 2, 4, 6]
+    P = omp_path(X, D, Ls, mask=M, min_group=10**9, dtype=np.float64)
+    nnz = (P != 0).sum(axis=2)
+    assert np.all(nnz[3] <= 4) and np.array_equal(nnz[3], nnz[2])
+    np.testing.assert_array_equal(P[3], P[2])
+    assert not P[:, 20].any()
+    expected = np.zeros(6)
+    expected[1] = 2.5  # further picks are noise-level, as in scikit-learn
+    np.testing.assert_allclose(P[:, 21], np.tile(expected, (4, 1)), atol=1e-8)
+    for t, L in enumerate(Ls):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            R = orthogonal_mp_gram(D @ D.T, (X @ D.T).T, n_nonzero_coefs=min(L, 4)).T
+        np.testing.assert_allclose(P[t], R, atol=1e-8)
+
+
 def test_omp_validates(random_problem):
     X, D, _ = random_problem
     for bad in (0, [5, 0], [], [1.5]):
