@@ -47,7 +47,7 @@ from .features import (
     rectangle_features_multi,
 )
 from .records import read_jsonl
-from .svm import FeatureStandardizer, SquaredHingeSVC
+from .svm import FeatureStandardizer, SquaredHingeSVC, squared_hinge_fit
 
 __all__ = [
     "PAPER_TABLE1",
@@ -247,33 +247,61 @@ def _fold_representation(data, train, learner, n_atoms, whiten, n_patches, extra
     return rep, time.process_time() - c0, time.perf_counter() - t0
 
 
-def _fit_svm(F, y, C):
+def _fit_svms(F, y, C_grid):
+    """Standardise on ``F`` and fit one SVM per C, all with one solver call.
+
+    The C values share the standardiser and the solver's kernel, each warm-started from the
+    previous one (:func:`dlsr.svm.squared_hinge_fit`); each fit is the one
+    ``SquaredHingeSVC(C=C)`` makes on the standardised features.
+
+    Parameters
+    ----------
+    F : ndarray of shape (n_samples, n_features)
+    y : ndarray of shape (n_samples,)
+        Two classes.
+    C_grid : sequence of float
+
+    Returns
+    -------
+    predict : callable
+        ``predict(F_new)`` is the list, one per C, of the predicted labels of ``F_new``
+        (ndarray of shape (n_new,)).
+    """
     scaler = FeatureStandardizer().fit(F)
-    svm = SquaredHingeSVC(C=C).fit(scaler.transform(F), y)
-    return scaler, svm
+    classes = np.unique(y)
+    y_pm = np.where(y == classes[1], 1.0, -1.0)
+    fits = squared_hinge_fit(scaler.transform(F), y_pm, C_grid)
+
+    def predict(F_new):
+        Z = scaler.transform(F_new)
+        return [classes[(Z @ w + b > 0).astype(int)] for w, b, _ in fits]
+
+    return predict
 
 
 def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
     """Inner CV over (encoder param, C) on the outer training fold, then the outer test.
 
-    ``feats`` maps each encoder parameter to its (training, test) features.
+    ``feats`` maps each encoder parameter to its (training, test) features. Per parameter and
+    inner fold, the C values are fitted together (one standardiser, one kernel); candidates are
+    compared in order (parameters, then C), a later one winning only if better by > 1e-12.
     """
     best = None
     for param, (Ftr, _) in feats.items():
-        for C in C_grid:
-            accs = []
-            for itr, iva in inner:
-                if len(np.unique(y_tr[itr])) < 2:
-                    continue
-                scaler, svm = _fit_svm(Ftr[itr], y_tr[itr], C)
-                accs.append(np.mean(svm.predict(scaler.transform(Ftr[iva])) == y_tr[iva]))
-            score = float(np.mean(accs)) if accs else -np.inf
+        accs = [[] for _ in C_grid]
+        for itr, iva in inner:
+            if len(np.unique(y_tr[itr])) < 2:
+                continue
+            preds = _fit_svms(Ftr[itr], y_tr[itr], C_grid)(Ftr[iva])
+            for acc, pred in zip(accs, preds, strict=True):
+                acc.append(np.mean(pred == y_tr[iva]))
+        for C, acc in zip(C_grid, accs, strict=True):
+            score = float(np.mean(acc)) if acc else -np.inf
             if best is None or score > best[0] + 1e-12:
                 best = (score, param, C)
     score, param, C = best
     Ftr, Fte = feats[param]
-    scaler, svm = _fit_svm(Ftr, y_tr, C)
-    pred = svm.predict(scaler.transform(Fte))
+    (pred,) = _fit_svms(Ftr, y_tr, [C])(Fte)
     return {
         "accuracy": float(np.mean(pred == y_te)),
         "n_test": int(len(y_te)),

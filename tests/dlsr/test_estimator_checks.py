@@ -1,7 +1,8 @@
 """scikit-learn's estimator checks on every estimator of the project.
 
 Collected from the modules' ``ESTIMATORS`` lists: ``dlsr.coding`` (encoders),
-``dlsr.dictionaries`` (dictionary learners) and ``dlsr.whitening`` (standardisation and ZCA).
+``dlsr.dictionaries`` (dictionary learners), ``dlsr.whitening`` (standardisation and ZCA) and
+``dlsr.svm`` (feature standardiser and the squared-hinge SVM).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from sklearn.utils.estimator_checks import parametrize_with_checks
 
 def _collect():
     out = []
-    for name in ("dlsr.coding", "dlsr.dictionaries", "dlsr.whitening"):
+    for name in ("dlsr.coding", "dlsr.dictionaries", "dlsr.whitening", "dlsr.svm"):
         try:
             mod = importlib.import_module(name)
         except ImportError:  # a module still being written: its checks are skipped below
@@ -33,7 +34,7 @@ def _expected_failed_checks(estimator):
 
 def test_every_module_exposes_estimators():
     names = {type(e).__name__ for e in ESTIMATORS}
-    assert {"SparseEncoder", "DictionaryLearner"} <= names
+    assert {"SparseEncoder", "DictionaryLearner", "SquaredHingeSVC"} <= names
     try:
         importlib.import_module("dlsr.whitening")
     except ImportError:

@@ -274,3 +274,52 @@ def test_bad_input_is_a_clear_error(separable):
         no_objects.groups("object")
     with pytest.raises(ValueError, match="no labelled rectangles"):
         rec.recognition_data([])
+
+
+def test_inner_cv_fits_all_C_of_a_fold_at_once(monkeypatch):
+    """One standardiser and one solver call per (parameter, inner fold), same choice as fitting
+    ``SquaredHingeSVC`` per (parameter, C, inner fold); ties go to the earlier candidate."""
+    from dlsr.svm import FeatureStandardizer, SquaredHingeSVC
+
+    rng = np.random.default_rng(0)
+    n_tr, n_te, d = 150, 50, 30
+    y = (rng.random(n_tr + n_te) < 0.5).astype(int)
+
+    def features(signal):
+        F = rng.normal(size=(n_tr + n_te, d)).astype(np.float32)
+        F[:, :3] += signal * (2 * y[:, None] - 1)
+        return F[:n_tr], F[n_tr:]
+    same = features(0.3)
+    feats = {0.5: same, 1.0: same, 2.0: features(0.0)}  # 0.5 and 1.0 tie, 2.0 is noise
+    y_tr, y_te = y[:n_tr], y[n_tr:]
+    inner = rec.outer_folds(np.arange(n_tr) % 10, 3)
+    C_grid = (1.0, 10.0)
+    calls = []
+    real_fit = rec.squared_hinge_fit
+
+    def counting(X, y_pm, Cs, **kw):
+        calls.append(list(Cs))
+        return real_fit(X, y_pm, Cs, **kw)
+
+    monkeypatch.setattr(rec, "squared_hinge_fit", counting)
+    out = rec._choose_and_test(feats, y_tr, y_te, inner, C_grid)
+    assert calls == [list(C_grid)] * (len(feats) * len(inner)) + [[out["C"]]]
+    # the reference: one estimator per (parameter, C, inner fold), as the benchmark did
+    best = None
+    for param, (Ftr, _) in feats.items():
+        for C in C_grid:
+            accs = []
+            for itr, iva in inner:
+                scaler = FeatureStandardizer().fit(Ftr[itr])
+                svm = SquaredHingeSVC(C=C).fit(scaler.transform(Ftr[itr]), y_tr[itr])
+                accs.append(np.mean(svm.predict(scaler.transform(Ftr[iva])) == y_tr[iva]))
+            if best is None or np.mean(accs) > best[0] + 1e-12:
+                best = (float(np.mean(accs)), param, C)
+    assert (out["inner_accuracy"], out["encoder_param"], out["C"]) == best
+    assert out["encoder_param"] == 0.5  # ties with 1.0, and comes first
+    Ftr, Fte = feats[best[1]]
+    scaler = FeatureStandardizer().fit(Ftr)
+    svm = SquaredHingeSVC(C=best[2]).fit(scaler.transform(Ftr), y_tr)
+    pred = svm.predict(scaler.transform(Fte))
+    assert out["predictions"] == pred.tolist()
+    assert out["accuracy"] == np.mean(pred == y_te) and out["n_test"] == n_te

@@ -1,13 +1,21 @@
-"""The squared-hinge SVM and the feature standardiser."""
+"""The squared-hinge SVM (Newton solver against the L-BFGS reference) and the standardiser."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.optimize import minimize, minimize_scalar
 from sklearn.datasets import make_classification
+from sklearn.exceptions import ConvergenceWarning
 from sklearn.svm import LinearSVC
 
-from dlsr.svm import FeatureStandardizer, SquaredHingeSVC, squared_hinge_objective
+from dlsr.svm import (
+    FeatureStandardizer,
+    SquaredHingeSVC,
+    _exact_step,
+    squared_hinge_fit,
+    squared_hinge_objective,
+)
 
 
 def _objective(model, X, y, C):
@@ -68,3 +76,232 @@ def test_standardizer_uses_var_plus_eps(rng):
     np.testing.assert_allclose(Z.mean(0), 0, atol=1e-12)
     np.testing.assert_allclose(Z[:, :2].var(0), X[:, :2].var(0) / (X[:, :2].var(0) + 1e-5))
     assert np.all(np.isfinite(Z))
+
+
+# --- the Newton solver (squared_hinge_fit, solver="newton") ---------------------------------
+
+C_VALUES = [0.01, 1.0, 10.0, 1000.0]
+# (n, d): kernel form without the subset start, primal form, kernel form with the subset start
+SHAPES = [(60, 150), (300, 40), (450, 300)]
+
+
+def _planted(n, d, seed, noise=0.1):
+    """Standardised-looking features, labels from a planted linear rule with label noise."""
+    rng = np.random.default_rng(seed)
+    X = rng.normal(size=(n, d))
+    score = X @ rng.normal(size=d) / np.sqrt(d) + 0.3
+    y = np.where(score > 0, 1.0, -1.0)
+    flip = rng.random(n) < noise
+    y[flip] = -y[flip]
+    return X, y
+
+
+def _value(w, b, X, y, C):
+    return squared_hinge_objective(np.r_[w, b], X, y, C)[0]
+
+
+def _grad(w, b, X, y, C):
+    return squared_hinge_objective(np.r_[w, b], X, y, C)[1]
+
+
+def _lbfgs(X, y, C):
+    """Reference: L-BFGS on the same objective, run to its limits."""
+    res = minimize(squared_hinge_objective, np.zeros(X.shape[1] + 1), args=(X, y, C), jac=True,
+                   method="L-BFGS-B",
+                   options={"gtol": 1e-12, "ftol": 1e-16, "maxiter": 100_000, "maxcor": 30})
+    return res.x[:-1], res.x[-1]
+
+
+@pytest.mark.parametrize(("n", "d"), SHAPES)
+@pytest.mark.parametrize("C", C_VALUES)
+def test_newton_reaches_the_lbfgs_minimum(n, d, C):
+    X, y = _planted(n, d, seed=n + d)
+    ((w, b, n_iter),) = squared_hinge_fit(X, y, [C])
+    w_ref, b_ref = _lbfgs(X, y, C)
+    ours, ref = _value(w, b, X, y, C), _value(w_ref, b_ref, X, y, C)
+    assert abs(ours - ref) <= 1e-6 * ref
+    assert ours <= ref * (1 + 1e-12)  # exact: never above what L-BFGS reaches
+    assert 1 <= n_iter <= 50  # a few steps; C = 1000 with n close to d takes the most
+    X_new, _ = _planted(500, d, seed=7)
+    f, f_ref = X_new @ w + b, X_new @ w_ref + b_ref
+    clear = np.abs(f) > 1e-3 * np.abs(f).max()  # not on the boundary itself
+    assert clear.mean() > 0.95
+    np.testing.assert_array_equal(f[clear] > 0, f_ref[clear] > 0)
+    np.testing.assert_array_equal((X @ w + b > 0), (X @ w_ref + b_ref > 0))
+
+
+@pytest.mark.parametrize(("n", "d"), SHAPES)
+def test_estimator_solvers_agree(n, d):
+    X, y01 = _planted(n, d, seed=3)
+    y = (y01 > 0).astype(int)
+    newton = SquaredHingeSVC(C=10.0).fit(X, y)
+    lbfgs = SquaredHingeSVC(C=10.0, solver="lbfgs").fit(X, y)
+    assert newton.solver == "newton" and newton.n_iter_ < lbfgs.n_iter_
+    value_newton, value_lbfgs = _objective(newton, X, y, 10.0), _objective(lbfgs, X, y, 10.0)
+    assert value_newton <= value_lbfgs
+    assert value_lbfgs - value_newton <= 1e-5 * value_newton  # L-BFGS stops at gtol=1e-6
+    assert np.mean(newton.predict(X) == lbfgs.predict(X)) >= 0.99
+
+
+@pytest.mark.parametrize(("n", "d"), SHAPES)
+def test_kernel_and_primal_forms_agree(n, d):
+    X, y = _planted(n, d, seed=11)
+    kernel = squared_hinge_fit(X, y, C_VALUES, form="kernel")
+    primal = squared_hinge_fit(X, y, C_VALUES, form="primal")
+    for (wk, bk, _), (wp, bp, _) in zip(kernel, primal, strict=True):
+        np.testing.assert_allclose(wk, wp, rtol=0, atol=1e-8 * np.abs(wp).max())
+        assert abs(bk - bp) <= 1e-8 * max(1.0, abs(bp))
+
+
+@pytest.mark.parametrize(("n", "d"), SHAPES)
+def test_warm_started_and_cold_solutions_agree(n, d):
+    X, y = _planted(n, d, seed=5)
+    Cs = [1.0, 10.0, 1000.0, 0.01, 10.0, 10.0]  # increasing, jumps down and up, a repeat
+    warm = squared_hinge_fit(X, y, Cs)
+    cold = squared_hinge_fit(X, y, Cs, warm_start=False)
+    for C, (ww, bw, _), (wc, bc, _) in zip(Cs, warm, cold, strict=True):
+        np.testing.assert_allclose(ww, wc, rtol=0, atol=1e-8 * np.abs(wc).max())
+        assert abs(bw - bc) <= 1e-8 * max(1.0, abs(bc))
+        ((w1, b1, _),) = squared_hinge_fit(X, y, [C])  # alone
+        np.testing.assert_allclose(ww, w1, rtol=0, atol=1e-8 * np.abs(w1).max())
+    # the repeated C starts at its own solution: one step, which changes nothing
+    assert warm[-1][2] == 1 and cold[-1][2] > 1
+    np.testing.assert_allclose(warm[-1][0], warm[-2][0], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(("n", "d"), SHAPES)
+@pytest.mark.parametrize("form", ["kernel", "primal"])
+def test_optimality_conditions_hold(n, d, form):
+    X, y = _planted(n, d, seed=13)
+    for C, (w, b, _) in zip(C_VALUES, squared_hinge_fit(X, y, C_VALUES, form=form),
+                            strict=True):
+        g = _grad(w, b, X, y, C)
+        g0 = _grad(np.zeros(d), 0.0, X, y, C)
+        assert np.linalg.norm(g) <= 1e-9 * np.linalg.norm(g0)
+        # stationarity in w and b, written out: w = 2C/n sum_SV y_i m_i x_i, sum_SV y_i m_i = 0
+        m = np.maximum(0.0, 1.0 - y * (X @ w + b))
+        alpha = 2.0 * C / n * y * m
+        np.testing.assert_allclose(w, X.T @ alpha, rtol=0, atol=1e-9 * np.abs(w).max())
+        assert abs(alpha.sum()) <= 1e-9 * np.abs(alpha).sum()
+        assert np.any((m > 0) & (y > 0)) and np.any((m > 0) & (y < 0))
+
+
+def test_separable_data():
+    X, y = _planted(80, 200, seed=1, noise=0.0)  # n < d: linearly separable
+    for C, (w, b, _) in zip(C_VALUES, squared_hinge_fit(X, y, C_VALUES), strict=True):
+        w_ref, b_ref = _lbfgs(X, y, C)
+        ours, ref = _value(w, b, X, y, C), _value(w_ref, b_ref, X, y, C)
+        assert abs(ours - ref) <= 1e-6 * ref
+        if C >= 10:
+            assert np.all(y * (X @ w + b) > 0)
+
+
+def test_duplicate_rows():
+    X, y = _planted(120, 30, seed=2)
+    # every row twice: the mean loss, hence the minimiser, is the same
+    ((w, b, _),) = squared_hinge_fit(X, y, [10.0])
+    ((w2, b2, _),) = squared_hinge_fit(np.r_[X, X], np.r_[y, y], [10.0])
+    np.testing.assert_allclose(w2, w, rtol=0, atol=1e-9 * np.abs(w).max())
+    assert abs(b2 - b) <= 1e-9
+    # every row once with each label: the origin is the minimiser (the gradient there is 0)
+    for form in ("kernel", "primal"):
+        ((w0, b0, n_iter),) = squared_hinge_fit(np.r_[X, X], np.r_[y, -y], [10.0], form=form)
+        assert np.abs(w0).max() < 1e-9 and abs(b0) < 1e-9 and n_iter == 1
+
+
+@pytest.mark.parametrize("form", ["kernel", "primal"])
+def test_constant_and_zero_feature_columns(form):
+    X, y = _planted(200, 20, seed=4)
+    X[:, 3] = 7.0  # collinear with the bias: its weight is 0, the bias takes it
+    X[:, 5] = 0.0
+    for C, (w, b, _) in zip(C_VALUES, squared_hinge_fit(X, y, C_VALUES, form=form),
+                            strict=True):
+        assert abs(w[3]) < 1e-9 and w[5] == 0
+        w_ref, b_ref = _lbfgs(np.delete(X, [3, 5], axis=1), y, C)
+        np.testing.assert_allclose(np.delete(w, [3, 5]), w_ref, rtol=0, atol=1e-4)
+        assert abs(b - b_ref) < 1e-4
+
+
+def test_exact_line_search_minimises_the_piecewise_quadratic(rng):
+    c = 0.05
+    n_breaks = 0
+    for scale in np.geomspace(0.01, 10, 40):
+        m = rng.normal(size=30)
+        s = scale * rng.normal(size=30)
+        pp = rng.random() + 0.1
+        # a Newton direction: the quadratic model of the current violators has its minimum at 1
+        act = m > 0
+        wp = -pp - np.sum(2 * c * s[act] * (s[act] - m[act]))
+
+        def phi(t, m=m, s=s, wp=wp, pp=pp):
+            return wp * t + 0.5 * pp * t * t + c * np.sum(np.maximum(0.0, m - t * s) ** 2)
+
+        t = _exact_step(m, s, wp, pp, c)
+        ref = minimize_scalar(phi, bounds=(0, 1e3), method="bounded",
+                              options={"xatol": 1e-12}).x
+        assert t >= 0
+        assert phi(t) <= phi(ref) + 1e-12
+        assert abs(t - ref) < 1e-5
+        breaks = m / s
+        n_breaks += np.any((breaks > 0) & (breaks < t))
+        if not np.any((breaks > 0) & (breaks < 1)):
+            assert t == 1.0  # the full Newton step, exactly
+    assert n_breaks >= 10  # most searches crossed breakpoints
+
+
+def _tiny(seed):
+    """A tiny random problem (the generator that found those where plain Newton cycles)."""
+    rng = np.random.default_rng(seed)
+    n, d = rng.integers(4, 12), rng.integers(1, 4)
+    X = rng.normal(size=(n, d)) * rng.choice([0.1, 1, 10])
+    y = np.where(rng.random(n) < 0.5, 1.0, -1.0)
+    return X, y, float(rng.choice([0.1, 1, 100, 1e4]))
+
+
+@pytest.mark.parametrize("seed", [40, 258, 941])
+def test_line_search_stops_the_cycles_of_plain_newton(seed, monkeypatch):
+    X, y, C = _tiny(seed)
+    for form in ("kernel", "primal"):
+        ((w, b, n_iter),) = squared_hinge_fit(X, y, [C], form=form)
+        w_ref, b_ref = _lbfgs(X, y, C)
+        assert _value(w, b, X, y, C) <= _value(w_ref, b_ref, X, y, C) * (1 + 1e-10)
+        assert n_iter <= 10
+    # full Newton steps (no line search) go round in circles on these problems
+    monkeypatch.setattr("dlsr.svm._exact_step", lambda *args: 1.0)
+    with pytest.warns(ConvergenceWarning, match="did not converge"):
+        squared_hinge_fit(X, y, [C], max_iter=200)
+
+
+def test_too_few_iterations_warn():
+    X, y = _planted(300, 40, seed=6)
+    with pytest.warns(ConvergenceWarning, match="did not converge for C=10"):
+        ((_, _, n_iter),) = squared_hinge_fit(X, y, [10.0], max_iter=1)
+    assert n_iter == 1
+
+
+def test_bad_input_is_a_clear_error():
+    X, y = _planted(30, 5, seed=0)
+    with pytest.raises(ValueError, match="both classes"):
+        squared_hinge_fit(X, np.ones(30), [1.0])
+    X_nan = X.copy()
+    X_nan[3, 2] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        squared_hinge_fit(X_nan, y, [1.0])
+    for C in (0.0, -1.0, np.nan, [1.0, 0.0]):
+        with pytest.raises(ValueError, match="C must be positive"):
+            squared_hinge_fit(X, y, C)
+    with pytest.raises(ValueError, match="only -1 and \\+1"):
+        squared_hinge_fit(X, (y > 0).astype(float), [1.0])
+    with pytest.raises(ValueError, match="same length"):
+        squared_hinge_fit(X, y[:-1], [1.0])
+    with pytest.raises(ValueError, match="form must be"):
+        squared_hinge_fit(X, y, [1.0], form="dual")
+    # the estimator, as before
+    with pytest.raises(ValueError, match="C must be positive"):
+        SquaredHingeSVC(C=0.0).fit(X, y)
+    with pytest.raises(ValueError, match="NaN"):
+        SquaredHingeSVC().fit(X_nan, y)
+    with pytest.raises(ValueError, match="solver must be"):
+        SquaredHingeSVC(solver="sgd").fit(X, y)
+    with pytest.raises(ValueError, match="both\\s+positive and negative"):
+        SquaredHingeSVC(solver="lbfgs").fit(X, np.ones(30))
