@@ -228,16 +228,7 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
                     for bb in range(k):
                         s += Ginv[a, bb] * v[bb]
                     coef[a] = s
-                for a in range(k):
-                    s = v[a]
-                    for bb in range(k):
-                        s -= Gc[bb, act[a]] * coef[bb]
-                    ga[a] = s
-                for a in range(k):
-                    s = 0.0
-                    for bb in range(k):
-                        s += Ginv[a, bb] * ga[bb]
-                    coef[a] += s
+                _refine(k, act, v, Gc, Ginv, coef, ga)
                 # exact correlations and the optimality check
                 for q in range(d):
                     c[q] = b[q]
@@ -361,10 +352,12 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
 
 
 @njit(nogil=True, cache=True, fastmath=_FAST)
-def _refine(k, act, b, Gc, Ginv, coef, res):
-    """One step of iterative refinement of ``coef`` (k selected atoms) with exact Gram entries."""
+def _refine(k, act, rhs, Gc, Ginv, coef, res):
+    """One step of iterative refinement of ``coef``, the solution of ``G_AA coef = rhs`` on the
+    ``k`` active atoms ``act`` (``Gc``: their exact Gram columns, ``Ginv``: the inverse of
+    ``G_AA``; ``res``: scratch)."""
     for s in range(k):
-        acc = b[act[s]]
+        acc = rhs[s]
         for q in range(k):
             acc -= Gc[q, act[s]] * coef[q]
         res[s] = acc
@@ -415,6 +408,7 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
     g = np.empty(L)
     v = np.empty(L)
     res = np.empty(L)
+    rhs = np.empty(L)
     c = np.empty(d)
     col = np.empty(d)
     m = np.empty(1)
@@ -467,7 +461,9 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
                     acc += Ginv[s, q] * b[act[q]]
                 coef[s] = acc
             if si < n_stops and stops[si] == k:
-                _refine(k, act, b, Gc, Ginv, coef, res)
+                for s in range(k):
+                    rhs[s] = b[act[s]]
+                _refine(k, act, rhs, Gc, Ginv, coef, res)
                 while si < n_stops and stops[si] == k:
                     for s in range(k):
                         out[si, i, act[s]] = coef[s]
@@ -481,7 +477,9 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
                         c[a] -= w * Gc[s, a]
         # stopped early: later stops keep its last solution (refined once)
         if si < n_stops and k > 0 and not (si > 0 and stops[si - 1] == k):
-            _refine(k, act, b, Gc, Ginv, coef, res)
+            for s in range(k):
+                rhs[s] = b[act[s]]
+            _refine(k, act, rhs, Gc, Ginv, coef, res)
         while si < n_stops:
             for s in range(k):
                 out[si, i, act[s]] = coef[s]
