@@ -298,29 +298,14 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
             jn = j_in
             last_drop = -1
             _column(jn, G, Dt, m, use_mask, col)
-            for a in range(k):
-                ga[a] = col[act[a]]
-            for a in range(k):
-                s = 0.0
-                for bb in range(k):
-                    s += Ginv[a, bb] * ga[bb]
-                v[a] = s
-            sigma = col[jn]
-            for a in range(k):
-                sigma -= ga[a] * v[a]
+            sigma = _schur(k, act, col, jn, Ginv, ga, v)
             if sigma <= 1e-10 * max(col[jn], 1e-300) or k == kmax:
                 # in the span of the active atoms (e.g. a repeated atom): it stays at 0
                 pen[jn] = np.inf
                 excluded[n_excl] = jn
                 n_excl += 1
                 continue
-            for a in range(k):
-                for bb in range(k):
-                    Ginv[a, bb] += v[a] * v[bb] / sigma
-            for a in range(k):
-                Ginv[k, a] = -v[a] / sigma
-                Ginv[a, k] = -v[a] / sigma
-            Ginv[k, k] = 1.0 / sigma
+            _border(k, Ginv, v, sigma)
             act[k] = jn
             sgn[k] = 1.0 if c[jn] > 0 else -1.0
             alpha = -sgn[k]
@@ -349,6 +334,36 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
             pen[act[a]] = 0.0
         for x in range(n_excl):
             pen[excluded[x]] = 0.0
+
+
+@njit(nogil=True, cache=True, fastmath=_FAST)
+def _schur(k, act, col, j, Ginv, g, v):
+    """Schur complement ``sigma = G_jj - g^T G_AA^{-1} g`` of atom ``j`` against the ``k``
+    active atoms ``act`` (``col``: its Gram column); fills ``g = G_Aj`` and ``v = G_AA^{-1} g``."""
+    for a in range(k):
+        g[a] = col[act[a]]
+    for a in range(k):
+        s = 0.0
+        for bb in range(k):
+            s += Ginv[a, bb] * g[bb]
+        v[a] = s
+    sigma = col[j]
+    for a in range(k):
+        sigma -= g[a] * v[a]
+    return sigma
+
+
+@njit(nogil=True, cache=True, fastmath=_FAST)
+def _border(k, Ginv, v, sigma):
+    """Grow ``Ginv`` (``k x k``, the inverse of ``G_AA``) to ``k + 1`` for the atom whose
+    :func:`_schur` gave ``v`` and ``sigma`` (the bordered inverse)."""
+    for a in range(k):
+        for bb in range(k):
+            Ginv[a, bb] += v[a] * v[bb] / sigma
+    for a in range(k):
+        Ginv[k, a] = -v[a] / sigma
+        Ginv[a, k] = -v[a] / sigma
+    Ginv[k, k] = 1.0 / sigma
 
 
 @njit(nogil=True, cache=True, fastmath=_FAST)
@@ -433,24 +448,10 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
                 best += 1
             _column(best, G, Dt, m, use_mask, col)
             diag = col[best]
-            sigma = diag
-            for s in range(k):
-                g[s] = col[act[s]]
-            for s in range(k):
-                acc = 0.0
-                for q in range(k):
-                    acc += Ginv[s, q] * g[q]
-                v[s] = acc
-                sigma -= g[s] * acc
+            sigma = _schur(k, act, col, best, Ginv, g, v)
             if not (sigma > 1e-10 * max(diag, tiny) and sigma > tiny):
                 break
-            for s in range(k):
-                vs = v[s] / sigma
-                for q in range(k):
-                    Ginv[s, q] += vs * v[q]
-                Ginv[k, s] = -vs
-                Ginv[s, k] = -vs
-            Ginv[k, k] = 1.0 / sigma
+            _border(k, Ginv, v, sigma)
             act[k] = best
             for a in range(d):
                 Gc[k, a] = col[a]
