@@ -142,6 +142,19 @@ _SUBSET_MIN_ROWS = 400
 _BLOCK_ROWS = 4096
 
 
+def _solve_spd(matrix, rhs):
+    """Solve ``A x = rhs`` for the symmetric positive definite ``A = matrix()`` (a fresh array).
+
+    Cholesky (LAPACK ``dposv``, overwriting ``A``; ``A.T`` is the Fortran-ordered array it
+    wants, no copy); when ``A`` is not positive definite in floating point (the regularisation
+    below the rounding of its entries), least squares on a second ``matrix()``.
+    """
+    _, x, info = lapack.dposv(matrix().T, rhs, lower=1, overwrite_a=1, overwrite_b=0)
+    if info != 0:
+        x = lstsq(matrix(), rhs, check_finite=False)[0]
+    return x
+
+
 class _KernelSystem:
     """Newton systems in kernel form; entries of ``K = X X^T`` computed once, when first needed.
 
@@ -198,17 +211,16 @@ class _KernelSystem:
         rows = np.flatnonzero(inside)  # positions in cache order: a boolean gather is fastest
         idx = self._order[rows]
         K = self._K[:m, :m]
-        A = K[inside][:, inside]
-        A.flat[:: len(idx) + 1] += lam
+
+        def matrix():
+            A = K[inside][:, inside]
+            A.flat[:: len(idx) + 1] += lam
+            return A
+
         rhs = np.empty((len(idx), 2))
         rhs[:, 0] = self.y[idx]
         rhs[:, 1] = 1.0
-        # A is symmetric: its transpose is the Fortran-ordered array LAPACK wants, no copy.
-        _, uv, info = lapack.dposv(A.T, rhs, lower=1, overwrite_a=1, overwrite_b=0)
-        if info != 0:  # not positive definite in floating point (lam below rounding of K)
-            A = K[inside][:, inside]
-            A.flat[:: len(idx) + 1] += lam
-            uv = lstsq(A, rhs, check_finite=False)[0]
+        uv = _solve_spd(matrix, rhs)
         u, v = uv[:, 0], uv[:, 1]
         b = u.sum() / v.sum()
         beta = np.zeros(m)  # in cache order: w = X^T beta reads the cached rows only
@@ -267,15 +279,14 @@ class _PrimalSystem:
         elif changed.size:  # add the rows that entered, subtract those that left
             self._accumulate(changed, np.where(S[changed], 1.0, -1.0))
         self._in = S
-        A = self._H.copy()
-        A.flat[: d * (d + 2): d + 2] += lam  # not the bias entry A[d, d]
-        y_S = np.where(S, self.y, 0.0)
-        rhs = np.r_[self.X.T @ y_S, y_S.sum()]
-        _, x, info = lapack.dposv(A.T, rhs, lower=1, overwrite_a=1, overwrite_b=0)
-        if info != 0:
+
+        def matrix():
             A = self._H.copy()
-            A.flat[: d * (d + 2): d + 2] += lam
-            x = lstsq(A, rhs, check_finite=False)[0]
+            A.flat[: d * (d + 2): d + 2] += lam  # not the bias entry A[d, d]
+            return A
+
+        y_S = np.where(S, self.y, 0.0)
+        x = _solve_spd(matrix, np.r_[self.X.T @ y_S, y_S.sum()])
         return x[:d].copy(), float(x[d])
 
 
