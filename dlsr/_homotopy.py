@@ -81,6 +81,56 @@ def _mask_entries(m, G, d, idx):
     return nq, subtract
 
 
+@njit(nogil=True, cache=True)
+def _argmin4(x, n):
+    """Smallest of ``x[:n]`` and its first index (``inf, -1`` when all are ``inf``): four
+    independent running minima, so that the comparisons do not wait on each other."""
+    m0 = np.inf
+    m1 = np.inf
+    m2 = np.inf
+    m3 = np.inf
+    i0 = -1
+    i1 = -1
+    i2 = -1
+    i3 = -1
+    j = 0
+    while j + 4 <= n:
+        x0 = x[j]
+        x1 = x[j + 1]
+        x2 = x[j + 2]
+        x3 = x[j + 3]
+        if x0 < m0:
+            m0 = x0
+            i0 = j
+        if x1 < m1:
+            m1 = x1
+            i1 = j + 1
+        if x2 < m2:
+            m2 = x2
+            i2 = j + 2
+        if x3 < m3:
+            m3 = x3
+            i3 = j + 3
+        j += 4
+    while j < n:
+        if x[j] < m0:
+            m0 = x[j]
+            i0 = j
+        j += 1
+    best = m0
+    ib = i0
+    if m1 < best or (m1 == best and m1 < np.inf and i1 < ib):
+        best = m1
+        ib = i1
+    if m2 < best or (m2 == best and m2 < np.inf and i2 < ib):
+        best = m2
+        ib = i2
+    if m3 < best or (m3 == best and m3 < np.inf and i3 < ib):
+        best = m3
+        ib = i3
+    return best, ib
+
+
 @njit(nogil=True, cache=True, fastmath=_FAST)
 def _column(j, G, Dt, use_mask, idx, nq, subtract, out):
     """Gram column ``G[:, j]`` (shared) or ``D diag(m) d_j`` (per-row mask) into ``out``.
@@ -123,7 +173,7 @@ def _column(j, G, Dt, use_mask, idx, nq, subtract, out):
 
 
 @njit(nogil=True, cache=True, fastmath=_FAST)
-def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
+def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, rows, slots, ok, max_steps, rtol):
     """Lasso homotopy for every row of ``B`` with snapshots at ``lams[i, :]``.
 
     Parameters
@@ -140,8 +190,12 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
     M : ndarray of shape (n, p), float64
         Per-row masks as 0/1 (used when ``use_mask``).
     use_mask : bool
-    out : ndarray of shape (t, n, d)
-        Zero-initialised output; row ``i``'s solution at ``lams[i, s]`` goes to ``out[s, i]``.
+    out : ndarray of shape (T, N, d), float32 or float64
+        Zero-initialised output, written in place (the caller's result, so that no per-chunk
+        copy is made): row ``i``'s solution at ``lams[i, s]`` goes to
+        ``out[slots[s], rows[i]]``.
+    rows : ndarray of shape (n,), int64
+    slots : ndarray of shape (t,), int64
     ok : ndarray of shape (n,), bool
         Set to False for rows that failed the optimality check or the step limit.
     max_steps : int
@@ -248,12 +302,7 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
                 gbuf[j] = min(g1, g2) + pen[j]
             if last_drop >= 0:
                 pen[last_drop] = 0.0
-            gam_in = np.inf
-            j_in = -1
-            for j in range(d):
-                if gbuf[j] < gam_in:
-                    gam_in = gbuf[j]
-                    j_in = j
+            gam_in, j_in = _argmin4(gbuf, d)
             # leaving: a coefficient crosses zero
             # (branch-free, so that the divisions vectorise; then the first smallest)
             for a in range(k):
@@ -304,7 +353,7 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, ok, max_steps, rtol):
                     finished = True
                     break
                 for a in range(k):
-                    out[t, i, act[a]] = coef[a]
+                    out[slots[t], rows[i], act[a]] = coef[a]
                 t += 1
                 if t == t_count:
                     finished = True
@@ -436,7 +485,7 @@ def _refine(k, act, rhs, Gc, Ginv, coef, res):
 
 
 @njit(nogil=True, cache=True, fastmath=_FAST)
-def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
+def omp_path_rows(B, G, Dt, M, use_mask, stops, out, rows, slots, tiny):
     """Orthogonal matching pursuit for every row of ``B``, with snapshots at ``stops`` atoms.
 
     Per row: select the atom of largest absolute residual correlation, border the inverse of
@@ -460,9 +509,11 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
     use_mask : bool
     stops : ndarray of shape (t,), int64
         Increasing numbers of atoms, each in ``[1, d]``.
-    out : ndarray of shape (t, n, d)
-        Zero-initialised; row ``i``'s solution with ``stops[s]`` atoms goes to ``out[s, i]``
-        (the last solution when the row stopped earlier).
+    out : ndarray of shape (T, N, d), float32 or float64
+        Zero-initialised, written in place; row ``i``'s solution with ``stops[s]`` atoms goes
+        to ``out[slots[s], rows[i]]`` (the last solution when the row stopped earlier).
+    rows : ndarray of shape (n,), int64
+    slots : ndarray of shape (t,), int64
     tiny : float
     """
     n, d = B.shape
@@ -520,7 +571,7 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
                 _refine(k, act, rhs, Gc, Ginv, coef, res)
                 while si < n_stops and stops[si] == k:
                     for s in range(k):
-                        out[si, i, act[s]] = coef[s]
+                        out[slots[si], rows[i], act[s]] = coef[s]
                     si += 1
             if k < L:
                 for a in range(d):
@@ -536,5 +587,5 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, tiny):
             _refine(k, act, rhs, Gc, Ginv, coef, res)
         while si < n_stops:
             for s in range(k):
-                out[si, i, act[s]] = coef[s]
+                out[slots[si], rows[i], act[s]] = coef[s]
             si += 1

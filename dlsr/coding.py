@@ -218,19 +218,19 @@ def _n_workers(n_jobs):
     return n_jobs
 
 
-def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None, n_paths=None,
-                  dtype=np.float64):
-    """Run ``solver(rows, op)`` over chunks of rows sharing a Gram operator.
+def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs, n_paths, dtype):
+    """Run ``solver(rows, op, out)`` over chunks of rows sharing a Gram operator.
 
     Rows sharing one mask (at least ``min_group`` of them) get that mask's Gram matrix; the rest
     get per-row masked products. With ``n_jobs > 1`` chunks run in threads (numpy and the
-    compiled kernels release the GIL) with single-threaded BLAS in each. ``solver`` returns
-    ``(r, d)`` codes, or ``(n_paths, r, d)`` when ``n_paths`` is given.
+    compiled kernels release the GIL) with single-threaded BLAS in each. ``solver`` writes the
+    codes of its rows into ``out``, of shape ``(n_paths, n, d)``, zero-initialised and returned
+    (the compiled kernels write there directly: per-chunk result arrays, their reordering and
+    their scatter into ``out`` cost as much as OMP itself).
     """
     n, _ = X.shape
     d = D.shape[0]
-    shape = (n, d) if n_paths is None else (n_paths, n, d)
-    out = np.zeros(shape, dtype=dtype)
+    out = np.zeros((n_paths, n, d), dtype=dtype)
     D64 = np.asarray(D, dtype=np.float64)
     if mask is None:
         groups, rest = [np.arange(n)], np.zeros(0, dtype=np.int64)
@@ -252,10 +252,7 @@ def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None, n_path
 
     def run(task):
         idx, op = task
-        if n_paths is None:
-            out[idx] = solver(idx, op)
-        else:
-            out[:, idx] = solver(idx, op)
+        solver(idx, op, out)
 
     workers = min(_n_workers(n_jobs), max(len(tasks), 1))
     with _threads.limit(1):  # small products: threaded BLAS only adds overhead
@@ -266,6 +263,26 @@ def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs=None, n_path
             with ThreadPoolExecutor(workers) as pool:
                 list(pool.map(run, tasks))
     return out
+
+
+def _slots(where, n_levels):
+    """First requested index of each distinct level, and a function copying it to the others.
+
+    ``where[w]`` is the level of requested value ``w``; kernels write level ``t`` to output
+    ``slots[t]`` and ``fill(out)`` copies it to the other outputs asking for the same level.
+    """
+    slots = np.full(n_levels, -1, dtype=np.int64)
+    for w, t in enumerate(where):
+        if slots[t] < 0:
+            slots[t] = w
+    dups = [(w, int(slots[t])) for w, t in enumerate(where) if slots[t] != w]
+
+    def fill(out):
+        for w, src in dups:
+            out[w] = out[src]
+        return out
+
+    return slots, fill
 
 
 def _check_lams(lam, name="lam"):
@@ -340,26 +357,25 @@ def lasso_path(
     G_full = D64 @ D64.T if mask is not None else None
     no_M = np.zeros((1, 1))
 
-    def solver(idx, op):
+    slots, fill = _slots(where, levels.size)
+
+    def solver(idx, op, out):
         B = np.ascontiguousarray(Xm[idx] @ D64.T)
         L = np.ascontiguousarray(scale[idx, None] * levels[None, :])
-        A = np.zeros((levels.size, idx.size, d))
         ok = np.ones(idx.size, dtype=bool)
         if isinstance(op, _SharedGram):
-            lasso_path_rows(B, L, op.G64, Dt, no_M, False, A, ok, max_steps, 1e-9)
+            lasso_path_rows(B, L, op.G64, Dt, no_M, False, out, idx, slots, ok, max_steps, 1e-9)
         else:
             M = np.ascontiguousarray(op.M, dtype=np.float64)
-            lasso_path_rows(B, L, G_full, Dt, M, True, A, ok, max_steps, 1e-9)
+            lasso_path_rows(B, L, G_full, Dt, M, True, out, idx, slots, ok, max_steps, 1e-9)
         if not ok.all():  # rare degenerate rows: scikit-learn's LARS per row and penalty
-            bad = np.flatnonzero(~ok)
-            rows = idx[bad]
+            rows = idx[~ok]
             for t, lam_t in enumerate(levels):
-                A[t, bad] = lasso_rowwise(
+                out[slots[t], rows] = lasso_rowwise(
                     X64[rows], D64, lam_t, None if mask is None else mask[rows])
-        return A[where]  # the requested order, per chunk (no copy of the whole output)
 
-    return _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
-                         n_paths=where.size, dtype=dtype)
+    return fill(_solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
+                              where.size, dtype))
 
 
 def lasso(
@@ -512,18 +528,18 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
     stops_c = np.minimum(stops, D64.shape[0]).astype(np.int64)
     no_M = np.zeros((1, 1))
 
-    def solver(idx, op):
+    slots, fill = _slots(where, stops_c.size)
+
+    def solver(idx, op, out):
         B = np.ascontiguousarray(Xm[idx] @ Dt)
-        A = np.zeros((stops_c.size, idx.size, D64.shape[0]))
         if isinstance(op, _SharedGram):
-            omp_path_rows(B, op.G64, Dt, no_M, False, stops_c, A, _TINY)
+            omp_path_rows(B, op.G64, Dt, no_M, False, stops_c, out, idx, slots, _TINY)
         else:
             M = np.ascontiguousarray(op.M, dtype=np.float64)
-            omp_path_rows(B, G_full, Dt, M, True, stops_c, A, _TINY)
-        return A[where]  # the requested order, per chunk
+            omp_path_rows(B, G_full, Dt, M, True, stops_c, out, idx, slots, _TINY)
 
-    return _solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
-                         n_paths=where.size, dtype=dtype)
+    return fill(_solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
+                              where.size, dtype))
 
 
 def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP,
