@@ -285,6 +285,17 @@ def _slots(where, n_levels):
     return slots, fill
 
 
+def _correlations(X64, D64, mask, given):
+    """``(X * mask) @ D.T`` in float64 (``X @ D.T`` without a mask), or the caller's copy."""
+    n, d = X64.shape[0], D64.shape[0]
+    if given is not None:
+        B = np.ascontiguousarray(given, dtype=np.float64)
+        if B.shape != (n, d):
+            raise ValueError(f"correlations must have shape {(n, d)}, got {B.shape}")
+        return B
+    return (X64 * mask if mask is not None else X64) @ D64.T
+
+
 def _check_lams(lam, name="lam"):
     lams = np.atleast_1d(np.asarray(lam, dtype=np.float64))
     if lams.ndim != 1 or lams.size == 0:
@@ -296,7 +307,7 @@ def _check_lams(lam, name="lam"):
 
 def lasso_path(
     X, D, lams, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP, dtype=np.float32,
-    max_steps=None,
+    max_steps=None, correlations=None,
 ):
     """Lasso codes of every row of ``X`` for several penalties, from one homotopy path.
 
@@ -328,6 +339,10 @@ def lasso_path(
         Output dtype (the path is computed in float64).
     max_steps : int, optional
         Homotopy steps per row before it is handed to the fallback (default ``8 d``).
+    correlations : ndarray of shape (n, d), float64, optional
+        ``(X * mask) @ D.T`` (``X @ D.T`` without a mask), when the caller already has it:
+        encoders sharing patches share this product (with masked entries of ``X`` already 0,
+        the masked and unmasked products are the same array).
 
     Returns
     -------
@@ -347,12 +362,8 @@ def lasso_path(
         max_steps = 8 * d
     X64 = np.asarray(X, dtype=np.float64)
     D64 = np.ascontiguousarray(D, dtype=np.float64)
-    if mask is not None:
-        Xm = X64 * mask
-        scale = mask.sum(axis=1) / p
-    else:
-        Xm = X64
-        scale = np.ones(n)
+    scale = mask.sum(axis=1) / p if mask is not None else np.ones(n)
+    B_all = _correlations(X64, D64, mask, correlations)
     Dt = np.ascontiguousarray(D64.T)
     G_full = D64 @ D64.T if mask is not None else None
     no_M = np.zeros((1, 1))
@@ -360,7 +371,7 @@ def lasso_path(
     slots, fill = _slots(where, levels.size)
 
     def solver(idx, op, out):
-        B = np.ascontiguousarray(Xm[idx] @ D64.T)
+        B = B_all[idx]
         L = np.ascontiguousarray(scale[idx, None] * levels[None, :])
         ok = np.ones(idx.size, dtype=bool)
         if isinstance(op, _SharedGram):
@@ -491,7 +502,7 @@ def omp_rowwise(X, D, n_nonzero, mask=None):
 
 
 def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP,
-             dtype=np.float32):
+             dtype=np.float32, correlations=None):
     """OMP codes for several numbers of atoms from one greedy run.
 
     OMP's selection does not depend on the final number of atoms, so one run to the largest
@@ -504,7 +515,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
     n_nonzeros : int or sequence of int
         Numbers of atoms, >= 1, in any order.
     mask : array-like of shape (n, p), bool, optional
-    n_jobs, chunk_size, min_group, dtype
+    n_jobs, chunk_size, min_group, dtype, correlations
         As in :func:`lasso_path`.
 
     Returns
@@ -523,7 +534,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
     X64 = np.asarray(X, dtype=np.float64)
     D64 = np.ascontiguousarray(D, dtype=np.float64)
     Dt = np.ascontiguousarray(D64.T)
-    Xm = X64 * mask if mask is not None else X64
+    B_all = _correlations(X64, D64, mask, correlations)
     G_full = D64 @ D64.T if mask is not None else None
     stops_c = np.minimum(stops, D64.shape[0]).astype(np.int64)
     no_M = np.zeros((1, 1))
@@ -531,7 +542,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
     slots, fill = _slots(where, stops_c.size)
 
     def solver(idx, op, out):
-        B = np.ascontiguousarray(Xm[idx] @ Dt)
+        B = B_all[idx]
         if isinstance(op, _SharedGram):
             omp_path_rows(B, op.G64, Dt, no_M, False, stops_c, out, idx, slots, _TINY)
         else:

@@ -285,14 +285,19 @@ def _encoder_plan(rep: Representation, encoder: str, params):
     return method, masked, values, True
 
 
-def _method_codes(X, M, rep: Representation, method: str, masked: bool, values) -> list:
-    """Codes of one computation for each of ``values`` (in that order), unsplit."""
+def _method_codes(X, M, rep: Representation, method: str, masked: bool, values,
+                  correlations=None) -> list:
+    """Codes of one computation for each of ``values`` (in that order), unsplit.
+
+    ``correlations``, optional, is ``X @ D.T`` in float64, shared by the lasso and OMP
+    computations (masked or not: masked entries of ``X`` are 0).
+    """
     D = rep.dictionary
     mask = M if masked else None
     if method == "lasso":
-        return list(coding.lasso_path(X, D, values, mask=mask))
+        return list(coding.lasso_path(X, D, values, mask=mask, correlations=correlations))
     if method == "omp":
-        return list(coding.omp_path(X, D, values, mask=mask))
+        return list(coding.omp_path(X, D, values, mask=mask, correlations=correlations))
     if method == "threshold":
         return list(coding.soft_threshold_path(X, D, values))
     atoms = rep.centroids if rep.centroids is not None else D
@@ -360,9 +365,21 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
         bucket = needed.setdefault((method, masked), [])
         bucket.extend(v for v in values if v not in bucket)
     codes = {}
+    B = None  # X @ D.T in float64, computed once for every lasso and OMP computation
+    zero_masked = None  # masked ones too, when the masked entries of X are 0 (they should be)
     for (method, masked), values in needed.items():
         c0 = time.process_time()
-        for v, A in zip(values, _method_codes(X, M, rep, method, masked, values), strict=True):
+        shared = None
+        if method in ("lasso", "omp"):
+            if masked and zero_masked is None:
+                zero_masked = not np.any(X[~np.asarray(M, dtype=bool)])
+            if not masked or zero_masked:
+                if B is None:
+                    D64 = np.asarray(rep.dictionary, dtype=np.float64)
+                    B = np.asarray(X, dtype=np.float64) @ D64.T
+                shared = B
+        for v, A in zip(values, _method_codes(X, M, rep, method, masked, values, shared),
+                        strict=True):
             codes[(method, masked, v)] = A
         if cpu_seconds is not None:
             key = (method, masked)

@@ -208,6 +208,24 @@ def test_lasso_path_equals_separate_solves(real_patches, masked):
     assert nnz == sorted(nnz) and nnz[0] < nnz[-1]
 
 
+@pytest.mark.parametrize("path", ["lasso", "omp"])
+def test_paths_read_given_correlations(real_patches, path):
+    """``correlations`` is used as ``(X * mask) D^T``: the caller's product gives the same codes,
+    a different one different codes, a wrong shape an error."""
+    X, M, D = real_patches
+    X, M = X[:60], M[:60]
+    fn, grid = (lasso_path, [1.0, 2.0]) if path == "lasso" else (omp_path, [1, 5])
+    for mask in (None, M):
+        Xm = X * mask if mask is not None else X
+        own = fn(X, D, grid, mask=mask)
+        given = fn(X, D, grid, mask=mask, correlations=Xm @ D.T)
+        np.testing.assert_array_equal(own, given)
+        other = fn(X, D, grid, mask=mask, correlations=0.5 * (Xm @ D.T))
+        assert not np.allclose(other, own)
+    with pytest.raises(ValueError, match="correlations"):
+        fn(X, D, grid, correlations=np.zeros((len(X) + 1, D.shape[0])))
+
+
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_lasso_path_rows_over_the_step_limit_fall_back_to_lars(real_patches):
     X, M, D = real_patches

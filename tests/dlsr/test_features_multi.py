@@ -47,10 +47,15 @@ def _alone(X, M, rep, encoder, param):
                                  param=rep.natural_param)
 
 
+@pytest.mark.parametrize("zero_masked", [True, False])
 @pytest.mark.parametrize("learner,natural_param", [("SC", 1.0), ("OMP", 5), ("GSVQ", None),
                                                    ("RP", None), ("NKM", None)])
-def test_multi_equals_each_encoder_alone(problem, learner, natural_param):
+def test_multi_equals_each_encoder_alone(problem, learner, natural_param, zero_masked):
+    """Also with values under the mask: then the masked computations cannot share the
+    unmasked ones' product ``X D^T`` (which they otherwise read)."""
     X, M, D = problem
+    if not zero_masked:
+        X = np.where(M, X, np.float32(3.0))
     centroids = 1.5 * D if learner == "NKM" else None
     rep = Representation(learner, D, centroids, None, None, natural_param)
     grids = {enc: ENCODER_GRIDS[enc] for enc in ENCODERS}
