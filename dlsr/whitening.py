@@ -25,6 +25,8 @@ import numpy as np
 from sklearn.base import BaseEstimator, OneToOneFeatureMixin, TransformerMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from ._dense import standardize_rows
+
 __all__ = [
     "CHANNEL_GROUPS",
     "standardize_patches",
@@ -86,20 +88,11 @@ def standardize_patches(X, M=None, eps: float = 1e-4):
     shape = X.shape
     p = shape[-1]
     dtype = X.dtype
-    X2 = X.reshape(-1, p)
-    M2 = M.reshape(-1, p)
-    G, g = _group_matrix(p)
+    X2 = np.ascontiguousarray(X.reshape(-1, p))
+    M2 = np.ascontiguousarray(M.reshape(-1, p), dtype=bool)
+    _, g = _group_matrix(p)
     out = np.empty(X2.shape, dtype=dtype)
-    for s in range(0, len(X2), _CHUNK):
-        x = X2[s:s + _CHUNK].astype(np.float64)
-        m = M2[s:s + _CHUNK]
-        x = np.where(m, x, 0.0)
-        cnt = m @ G  # (b, 4) valid entries per group
-        mean = (x @ G) / np.maximum(cnt, 1.0)
-        xc = np.where(m, x - mean[:, g], 0.0)
-        var = ((xc * xc) @ G) / np.maximum(cnt - 1.0, 1.0)
-        var[cnt < 2] = 0.0
-        out[s:s + _CHUNK] = xc / np.sqrt(var + eps)[:, g]
+    standardize_rows(X2, M2, g.astype(np.int64), len(CHANNEL_GROUPS), float(eps), out)
     return out.reshape(shape)
 
 
