@@ -16,7 +16,8 @@ A canvas is an ``(H, W, 8)`` float32 image with an ``(H, W, 8)`` validity mask (
   dotted with per-quadrant weights, without storing the codes;
 * :func:`standardize_rows`: :func:`dlsr.whitening.standardize_patches` on flattened patches
   (two passes per row instead of numpy's eight over the array);
-* :func:`soft_threshold_inplace` and :func:`triangle_inplace`: the element-wise parts of
+* :func:`soft_threshold_inplace` (:func:`soft_threshold_into` for a separate output) and
+  :func:`triangle_inplace`: the element-wise parts of
   :func:`dlsr.coding.soft_threshold` and :func:`dlsr.coding.kmeans_triangle` in one pass over
   a chunk of projections (numpy's separate passes cost a third of the matrix product).
 
@@ -36,6 +37,7 @@ __all__ = [
     "gather_masks",
     "triangle_scores",
     "soft_threshold_inplace",
+    "soft_threshold_into",
     "triangle_inplace",
     "standardize_rows",
 ]
@@ -244,6 +246,19 @@ def soft_threshold_inplace(A, lam):
             a = abs(v) - lam
             row[j] = (a if v > 0 else -a) if a > 0 else 0.0
     return total
+
+
+@njit(nogil=True, cache=True, fastmath=_FAST)
+def soft_threshold_into(Z, lam, out):
+    """``out <- sign(Z) max(|Z| - lam, 0)``, one pass (``Z``: ``(n, d)``, read only)."""
+    n, d = Z.shape
+    for i in range(n):
+        row = Z[i]
+        dst = out[i]
+        for j in range(d):
+            v = row[j]
+            a = abs(v) - lam
+            dst[j] = (a if v > 0 else -a) if a > 0 else 0.0
 
 
 @njit(nogil=True, cache=True, fastmath=_FAST)

@@ -676,15 +676,16 @@ def soft_threshold_path(X, D, lams, *, chunk_size=4096, dtype=np.float32):
     A : ndarray of shape (len(lams), n, d)
         ``A[t]`` equals ``soft_threshold(X, D, lams[t])``.
     """
-    from dlsr._dense import soft_threshold_inplace
+    from dlsr._dense import soft_threshold_into
 
     lams = _check_lams(lams, "lams")
     Z = soft_threshold(X, D, 0.0, chunk_size=chunk_size, dtype=dtype)  # D x, checked finite
     out = np.empty((lams.size,) + Z.shape, dtype=Z.dtype)
     for t, lam in enumerate(lams):
-        out[t] = Z
         if lam > 0:
-            soft_threshold_inplace(out[t], Z.dtype.type(lam))
+            soft_threshold_into(Z, Z.dtype.type(lam), out[t])
+        else:
+            out[t] = Z
     return out
 
 
