@@ -247,6 +247,24 @@ def _fold_representation(data, train, learner, n_atoms, whiten, n_patches, extra
     return rep, time.process_time() - c0, time.perf_counter() - t0
 
 
+#: Relative cost of one (learner, outer fold) task on the whole encoder grid (representation
+#: included), measured on the Jacquard samples (2,000 rectangles, d = 300): only used to start
+#: the longest tasks first, so that the last ones to finish are short.
+_TASK_COST = {"R": 250, "RP": 190, "SC": 180, "OMP": 150, "GSVQ": 140, "NKM": 140}
+
+
+def _fold_task(key, data, train, test, rep, rep_args, encoders, groups, inner_folds, C_grid):
+    """One ``key = (learner, outer fold)`` task: the fold's representation when not given
+    (``rep`` None), then :func:`_learner_fold`. Returns ``(key, rep, fitted_here, cpu seconds,
+    wall seconds, results)``, the seconds those of the representation."""
+    cpu = wall = 0.0
+    fitted = rep is None
+    if fitted:
+        rep, cpu, wall = _fold_representation(data, train, key[0], *rep_args)
+    return key, rep, fitted, cpu, wall, _learner_fold(data, train, test, rep, encoders, groups,
+                                                      inner_folds, C_grid)
+
+
 def _fit_svms(F, y, C_grid):
     """Standardise on ``F`` and fit one SVM per C, all with one solver call.
 
@@ -383,14 +401,16 @@ def nested_cv_cells(
 ):
     """Nested cross-validation of several learner-encoder combinations, one cell at a time out.
 
-    Every (learner, outer fold) pair is one task and all of them go to one pool of ``n_jobs``
-    workers (after the representations, also one task per learner and fold in one pool), so
-    the workers stay busy across cells. A task computes the features of all of the learner's
-    encoders at once: patches are extracted and whitened once, and encoders that read the same
-    codes share them (SC and SC-Natural, OMP and OMP-Natural, mOMP and GSVQ-Natural, ST and
-    RP/R-Natural; :func:`dlsr.features.encode_patches_multi`). A learner's cells are yielded,
-    in the order given, as soon as its folds are done, so a caller can save them before the
-    next learner finishes.
+    Every (learner, outer fold) pair is one task (the fold's representation when it is not
+    cached, then the features and the inner and outer fits of all of the learner's encoders)
+    and all of them go to one pool of ``n_jobs`` workers, the most expensive learners first
+    (so that the last tasks to finish are short ones and no worker idles long at the end). A
+    task computes the features of all of the learner's encoders at once: patches are
+    extracted and whitened once, and encoders that read the same codes share them (SC and
+    SC-Natural, OMP and OMP-Natural, mOMP and GSVQ-Natural, ST and RP/R-Natural;
+    :func:`dlsr.features.encode_patches_multi`). A learner's cells are yielded together, in
+    the order given, as soon as its folds are done (learners in the order they finish), so
+    a caller can save them before the other learners finish.
 
     Parameters
     ----------
@@ -440,27 +460,33 @@ def nested_cv_cells(
     reps = representations if representations is not None else {}
     rep_dir = Path(representation_dir) if representation_dir is not None else None
     learners = list(dict.fromkeys(lrn for lrn, _ in cells))
-    rep_cost = {lrn: [0.0, 0.0] for lrn in learners}  # wall, CPU seconds fitted here
-    missing = []
     for lrn in learners:
         for k in range(n_folds):
-            if (lrn, k) in reps:
-                continue
             path = rep_dir / f"{lrn}_fold{k}.npz" if rep_dir is not None else None
-            if path is not None and path.exists():
+            if (lrn, k) not in reps and path is not None and path.exists():
                 with np.load(path) as z:
                     meta = json.loads(str(z["meta"]))
                     reps[(lrn, k)] = Representation.from_arrays(z, lrn, meta["natural_param"])
-            else:
-                missing.append((lrn, k))
-    if missing:
-        fitted = Parallel(n_jobs=n_jobs, return_as="generator")(
-            delayed(_fold_representation)(
-                data, folds[k][0], lrn, n_atoms, whiten, n_patches, extra, int(seeds[k])
-            )
-            for lrn, k in missing
+    encoders_of: dict = {}
+    for lrn, enc in cells:
+        encoders_of.setdefault(lrn, []).append(enc)
+    # one task per (learner, fold): its representation (when missing) and the features of all
+    # the learner's encoders (patches and shared computations once); the longest first
+    tasks = sorted(((lrn, k) for lrn in learners for k in range(n_folds)),
+                   key=lambda t: -_TASK_COST.get(t[0], 0))
+    results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+        delayed(_fold_task)(
+            (lrn, k), data, folds[k][0], folds[k][1], reps.get((lrn, k)),
+            (n_atoms, whiten, n_patches, extra, int(seeds[k])), encoders_of[lrn], groups,
+            inner_folds, tuple(C_grid),
         )
-        for (lrn, k), (rep, cpu, wall) in zip(missing, fitted, strict=True):
+        for lrn, k in tasks
+    )
+    rep_cost = {lrn: [0.0, 0.0] for lrn in learners}  # wall, CPU seconds fitted here
+    fold_results: dict = {}
+    for (lrn, k), rep, fitted, cpu, wall, res in results:
+        fold_results[(lrn, k)] = res
+        if fitted:
             reps[(lrn, k)] = rep
             rep_cost[lrn][0] += wall
             rep_cost[lrn][1] += cpu
@@ -472,20 +498,7 @@ def nested_cv_cells(
                 meta = json.dumps({"natural_param": param})
                 np.savez(rep_dir / f"{lrn}_fold{k}.npz", meta=np.array(meta),
                          **rep.to_arrays())
-    # one task per (learner, fold): the learner's encoders share patches and computations
-    encoders_of: dict = {}
-    for lrn, enc in cells:
-        encoders_of.setdefault(lrn, []).append(enc)
-    tasks = [(lrn, k) for lrn in learners for k in range(n_folds)]
-    results = Parallel(n_jobs=n_jobs, return_as="generator")(
-        delayed(_learner_fold)(data, folds[k][0], folds[k][1], reps[(lrn, k)],
-                               encoders_of[lrn], groups, inner_folds, tuple(C_grid))
-        for lrn, k in tasks
-    )
-    fold_results: dict = {}
-    for (lrn, k), res in zip(tasks, results, strict=True):
-        fold_results[(lrn, k)] = res
-        if k < n_folds - 1:
+        if any((lrn, f) not in fold_results for f in range(n_folds)):
             continue
         rep_wall, rep_cpu = rep_cost[lrn]
         for i, enc in enumerate(encoders_of[lrn]):

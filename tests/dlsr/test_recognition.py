@@ -160,6 +160,7 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
     assert "| NKM |" in table and "| RP |" in table
     # Drop the second cell, as if the run had been killed; the rerun computes only that one.
     (tmp_path / "results.jsonl").write_text(lines[0] + "\n")
+    dropped = json.loads(lines[1])["learner"]
     calls, fitted = [], []
     real_fold, real_rep = rec._learner_fold, rec._fold_representation
 
@@ -174,9 +175,10 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
     monkeypatch.setattr(rec, "_learner_fold", counting)
     monkeypatch.setattr(rec, "_fold_representation", counting_rep)
     again = rec.run_recognition_benchmark(separable, tmp_path, **kw)
-    assert calls == [("RP", ("Natural",))] * 3  # its three outer folds, nothing else
+    assert calls == [(dropped, ("Natural",))] * 3  # its three outer folds, nothing else
     assert fitted == []  # the representations saved by the first run are reused
-    assert [c["accuracy"] for c in again["cells"]] == [c["accuracy"] for c in first["cells"]]
+    assert ({(c["learner"], c["accuracy"]) for c in again["cells"]}
+            == {(c["learner"], c["accuracy"]) for c in first["cells"]})
     saved = json.loads((tmp_path / "recognition.json").read_text())
     assert len(saved["cells"]) == 2
     # Another configuration in the same folder does not reuse those cells.
@@ -240,9 +242,10 @@ def test_cells_together_equal_cells_alone(separable):
     kw = dict(split="image", n_folds=3, inner_folds=2, random_state=0, **SMALL)
     together = list(rec.nested_cv_cells(separable, [("RP", "ST"), ("NKM", "Natural"),
                                                     ("RP", "Natural")], n_jobs=2, **kw))
-    # a learner's cells come out together, in the order given
-    assert [(c["learner"], c["encoder"]) for c in together] == [
-        ("RP", "ST"), ("RP", "Natural"), ("NKM", "Natural")]
+    # a learner's cells come out together, in the order given (learners as they finish)
+    got = [(c["learner"], c["encoder"]) for c in together]
+    assert got in ([("RP", "ST"), ("RP", "Natural"), ("NKM", "Natural")],
+                   [("NKM", "Natural"), ("RP", "ST"), ("RP", "Natural")])
     for cell in together:
         alone = rec.nested_cv_cell(separable, cell["learner"], cell["encoder"], **kw)
         assert cell["accuracy"] == alone["accuracy"]
@@ -250,9 +253,9 @@ def test_cells_together_equal_cells_alone(separable):
             f["predictions"] for f in alone["folds"]]
         assert [f["encoder_param"] for f in cell["folds"]] == [
             f["encoder_param"] for f in alone["folds"]]
-    # the learner's representation cost is charged once, to its first cell
-    assert together[0]["representation_cpu_seconds"] > 0
-    assert together[1]["representation_cpu_seconds"] == 0
+    # a learner's representation cost is charged once, to its first cell
+    rp = [c for c in together if c["learner"] == "RP"]
+    assert rp[0]["representation_cpu_seconds"] > 0 and rp[1]["representation_cpu_seconds"] == 0
     assert all(f["cpu_seconds"] > 0 for c in together for f in c["folds"])
 
 
