@@ -22,6 +22,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from . import coding, dictionaries, patches, whitening
+from ._memory import small_pages
 
 __all__ = [
     "LEARNERS",
@@ -464,31 +465,32 @@ def rectangle_features_multi(
         if not list(params):
             raise ValueError(f"params of {enc!r} must hold at least one encoder parameter")
     acc = cpu_seconds if cpu_seconds is not None else {}
-    out = None
-    for start in range(0, n, chunk_size):
-        c0 = time.process_time()
-        P, PM = patches.extract_patches(images[start:start + chunk_size],
-                                        masks[start:start + chunk_size], PATCH_SIZE)
-        b, g, p = P.shape
-        Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
-                                 (rep.zca_mean, rep.zca_matrix))
-        acc["patches"] = acc.get("patches", 0.0) + time.process_time() - c0
-        plans, codes = _multi_codes(Xp, PM.reshape(b * g, p), rep, grids, acc)
-        c0 = time.process_time()
-        side = int(round(np.sqrt(g)))
-        pooled: dict = {}
-        for keys in plans.values():
-            for key in keys:
-                if key not in pooled:
-                    pooled[key] = _split_pool(codes[key[:3]].reshape(b, side, side, -1),
-                                              bool(polarity and key[3]))
-        if out is None:
-            out = {enc: [np.empty((n, pooled[key].shape[1]), dtype=np.float32) for key in keys]
-                   for enc, keys in plans.items()}
-        for enc, keys in plans.items():
-            for t, key in enumerate(keys):
-                out[enc][t][start:start + b] = pooled[key]
-        acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
+    with small_pages():  # see dlsr._memory: fresh huge pages cost more than they save
+        out = None
+        for start in range(0, n, chunk_size):
+            c0 = time.process_time()
+            P, PM = patches.extract_patches(images[start:start + chunk_size],
+                                            masks[start:start + chunk_size], PATCH_SIZE)
+            b, g, p = P.shape
+            Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
+                                     (rep.zca_mean, rep.zca_matrix))
+            acc["patches"] = acc.get("patches", 0.0) + time.process_time() - c0
+            plans, codes = _multi_codes(Xp, PM.reshape(b * g, p), rep, grids, acc)
+            c0 = time.process_time()
+            side = int(round(np.sqrt(g)))
+            pooled: dict = {}
+            for keys in plans.values():
+                for key in keys:
+                    if key not in pooled:
+                        pooled[key] = _split_pool(codes[key[:3]].reshape(b, side, side, -1),
+                                                  bool(polarity and key[3]))
+            if out is None:
+                out = {enc: [np.empty((n, pooled[key].shape[1]), dtype=np.float32) for key in keys]
+                       for enc, keys in plans.items()}
+            for enc, keys in plans.items():
+                for t, key in enumerate(keys):
+                    out[enc][t][start:start + b] = pooled[key]
+            acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
     return out
 
 
