@@ -20,6 +20,10 @@ At every snapshot the coefficients are recomputed as ``a_A = G_AA^{-1} (b_A - la
 step of iterative refinement, the correlations are recomputed exactly, and the lasso optimality
 (KKT) conditions are checked: ``|c_j| <= lam`` off the support, sign agreement on it. A row that
 fails, or exceeds the step limit, is flagged so that the caller solves it another way.
+Snapshots are computed aside, from the active set of the segment they fall on, and leave the
+path's state alone: the path, and so each recorded solution, is the same bit for bit whichever
+other penalties are requested (OMP likewise records refined copies), so encoding a test fold at
+one chosen parameter gives exactly the codes the whole grid gives.
 
 Also here, the other compiled per-row solve of :mod:`dlsr.coding`: orthogonal matching pursuit
 with snapshots at several numbers of atoms (:func:`omp_path_rows`), on the same Gram columns.
@@ -216,6 +220,8 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, rows, slots, ok, max_steps
     v = np.empty(kmax)
     ga = np.empty(kmax)
     gout = np.empty(kmax)  # step at which each active coefficient reaches 0
+    cs = np.empty(kmax)  # a recorded solution on the active atoms
+    cc = np.empty(d)  # its exact correlations
     c = np.empty(d)
     e = np.empty(d)
     col = np.empty(d)
@@ -310,55 +316,28 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, rows, slots, ok, max_steps
                 g = -coef[a] / ua if ua != 0.0 else np.inf
                 gout[a] = g if g > 0.0 else np.inf
             gam_out, q_out = _argmin(gout, k)
-            gam_end = lam - lams[i, t]
-            gam = min(gam_in, gam_out, gam_end)
+            # every requested penalty reached on this segment [lam - gam, lam] is recorded
+            # from the segment's active set without touching the path's state, so that the
+            # path (and each recorded solution) does not depend on which penalties are asked for
+            gam = min(gam_in, gam_out)
+            while t < t_count and lams[i, t] >= lam - gam:
+                if not _snapshot(k, act, sgn, b, lams[i, t], Ginv, Gc, rtol, cs, cc, v, ga):
+                    ok[i] = False
+                    finished = True
+                    break
+                for a in range(k):
+                    out[slots[t], rows[i], act[a]] = cs[a]
+                t += 1
+            if finished:
+                break
+            if t == t_count:
+                finished = True
+                break
             for a in range(k):
                 coef[a] += gam * u[a]
             for q in range(d):
                 c[q] -= gam * e[q]
             lam -= gam
-            if gam_end <= gam_in and gam_end <= gam_out:
-                # snapshot at lam_t: exact coefficients plus one refinement step
-                lam = lams[i, t]
-                for a in range(k):
-                    v[a] = b[act[a]] - lam * sgn[a]
-                for a in range(k):
-                    s = 0.0
-                    for bb in range(k):
-                        s += Ginv[a, bb] * v[bb]
-                    coef[a] = s
-                _refine(k, act, v, Gc, Ginv, coef, ga)
-                # exact correlations and the optimality check
-                for q in range(d):
-                    c[q] = b[q]
-                for a in range(k):
-                    ca = coef[a]
-                    for q in range(d):
-                        c[q] -= ca * Gc[a, q]
-                tol = rtol * max(lam, 1.0)
-                good = True
-                for a in range(k):
-                    if coef[a] * sgn[a] < -tol or abs(c[act[a]] - lam * sgn[a]) > tol:
-                        good = False
-                for j in range(d):
-                    if abs(c[j]) > lam + tol:
-                        ok_j = False
-                        for a in range(k):
-                            if act[a] == j:
-                                ok_j = True
-                        if not ok_j:
-                            good = False
-                if not good:
-                    ok[i] = False
-                    finished = True
-                    break
-                for a in range(k):
-                    out[slots[t], rows[i], act[a]] = coef[a]
-                t += 1
-                if t == t_count:
-                    finished = True
-                    break
-                continue
             if gam_out < gam_in:
                 # drop slot q_out: Schur downdate, then move the last slot into its place
                 q = q_out
@@ -436,6 +415,42 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, rows, slots, ok, max_steps
 
 
 @njit(nogil=True, cache=True, fastmath=_FAST)
+def _snapshot(k, act, sgn, b, lam, Ginv, Gc, rtol, coef, c, v, res):
+    """The lasso solution at ``lam`` on the active set (signs ``sgn``): ``coef = G_AA^{-1}
+    (b_A - lam s)`` plus one refinement step, its exact correlations ``c = b - G_A coef`` and
+    the optimality (KKT) check, ``|c_j| <= lam`` off the support and sign agreement on it
+    (relative tolerance ``rtol``). Returns whether the check passed."""
+    d = c.shape[0]
+    for a in range(k):
+        v[a] = b[act[a]] - lam * sgn[a]
+    for a in range(k):
+        s = 0.0
+        for bb in range(k):
+            s += Ginv[a, bb] * v[bb]
+        coef[a] = s
+    _refine(k, act, v, Gc, Ginv, coef, res)
+    for q in range(d):
+        c[q] = b[q]
+    for a in range(k):
+        ca = coef[a]
+        for q in range(d):
+            c[q] -= ca * Gc[a, q]
+    tol = rtol * max(lam, 1.0)
+    for a in range(k):
+        if coef[a] * sgn[a] < -tol or abs(c[act[a]] - lam * sgn[a]) > tol:
+            return False
+    for j in range(d):
+        if abs(c[j]) > lam + tol:
+            active = False
+            for a in range(k):
+                if act[a] == j:
+                    active = True
+            if not active:
+                return False
+    return True
+
+
+@njit(nogil=True, cache=True, fastmath=_FAST)
 def _schur(k, act, col, j, Ginv, g, v):
     """Schur complement ``sigma = G_jj - g^T G_AA^{-1} g`` of atom ``j`` against the ``k``
     active atoms ``act`` (``col``: its Gram column); fills ``g = G_Aj`` and ``v = G_AA^{-1} g``."""
@@ -485,6 +500,16 @@ def _refine(k, act, rhs, Gc, Ginv, coef, res):
 
 
 @njit(nogil=True, cache=True, fastmath=_FAST)
+def _refined_copy(k, act, b, Gc, Ginv, coef, rhs, res, out):
+    """``out`` = the least-squares coefficients ``coef`` on the ``k`` selected atoms after one
+    refinement step (``coef`` itself unchanged)."""
+    for s in range(k):
+        rhs[s] = b[act[s]]
+        out[s] = coef[s]
+    _refine(k, act, rhs, Gc, Ginv, out, res)
+
+
+@njit(nogil=True, cache=True, fastmath=_FAST)
 def omp_path_rows(B, G, Dt, M, use_mask, stops, out, rows, slots, tiny):
     """Orthogonal matching pursuit for every row of ``B``, with snapshots at ``stops`` atoms.
 
@@ -527,6 +552,7 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, rows, slots, tiny):
     v = np.empty(L)
     res = np.empty(L)
     rhs = np.empty(L)
+    cs = np.empty(L)  # a recorded (refined) solution
     c = np.empty(d)
     col = np.empty(d)
     midx = np.empty(Dt.shape[0], dtype=np.int64)
@@ -565,13 +591,11 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, rows, slots, tiny):
                 for q in range(k):
                     acc += Ginv[s, q] * b[act[q]]
                 coef[s] = acc
-            if si < n_stops and stops[si] == k:
-                for s in range(k):
-                    rhs[s] = b[act[s]]
-                _refine(k, act, rhs, Gc, Ginv, coef, res)
+            if si < n_stops and stops[si] == k:  # recorded refined, the path continues as is
+                _refined_copy(k, act, b, Gc, Ginv, coef, rhs, res, cs)
                 while si < n_stops and stops[si] == k:
                     for s in range(k):
-                        out[slots[si], rows[i], act[s]] = coef[s]
+                        out[slots[si], rows[i], act[s]] = cs[s]
                     si += 1
             if k < L:
                 for a in range(d):
@@ -582,10 +606,8 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, rows, slots, tiny):
                         c[a] -= w * Gc[s, a]
         # stopped early: later stops keep its last solution (refined once)
         if si < n_stops and k > 0 and not (si > 0 and stops[si - 1] == k):
-            for s in range(k):
-                rhs[s] = b[act[s]]
-            _refine(k, act, rhs, Gc, Ginv, coef, res)
+            _refined_copy(k, act, b, Gc, Ginv, coef, rhs, res, cs)
         while si < n_stops:
             for s in range(k):
-                out[slots[si], rows[i], act[s]] = coef[s]
+                out[slots[si], rows[i], act[s]] = cs[s]
             si += 1

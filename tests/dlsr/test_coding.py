@@ -226,6 +226,22 @@ def test_paths_read_given_correlations(real_patches, path):
         fn(X, D, grid, correlations=np.zeros((len(X) + 1, D.shape[0])))
 
 
+@pytest.mark.parametrize("masked", [False, True])
+def test_paths_do_not_depend_on_the_other_requested_values(real_patches, masked):
+    """A penalty's (a number of atoms') codes are the same bit for bit alone or among others:
+    recording a solution does not change the path."""
+    X, M, D = real_patches
+    X, M = X[:200], (M[:200] if masked else None)
+    grid = lasso_path(X, D, [0.5, 1.0, 1.5, 2.0], mask=M, dtype=np.float64)
+    for t, lam in enumerate([0.5, 1.0, 1.5, 2.0]):
+        np.testing.assert_array_equal(lasso_path(X, D, [lam], mask=M, dtype=np.float64)[0],
+                                      grid[t])
+    grid = omp_path(X, D, [1, 5, 10, 15], mask=M, dtype=np.float64)
+    for t, L in enumerate([1, 5, 10, 15]):
+        np.testing.assert_array_equal(omp_path(X, D, [L], mask=M, dtype=np.float64)[0],
+                                      grid[t])
+
+
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_lasso_path_rows_over_the_step_limit_fall_back_to_lars(real_patches):
     X, M, D = real_patches
