@@ -297,15 +297,15 @@ def _fit_svms(F, y, C_grid):
     return predict
 
 
-def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
-    """Inner CV over (encoder param, C) on the outer training fold, then the outer test.
+def _choose(feats_tr, y_tr, inner, C_grid):
+    """Inner CV over (encoder param, C) on the outer training fold: ``(score, param, C)``.
 
-    ``feats`` maps each encoder parameter to its (training, test) features. Per parameter and
+    ``feats_tr`` maps each encoder parameter to its training features. Per parameter and
     inner fold, the C values are fitted together (one standardiser, one kernel); candidates are
     compared in order (parameters, then C), a later one winning only if better by > 1e-12.
     """
     best = None
-    for param, (Ftr, _) in feats.items():
+    for param, Ftr in feats_tr.items():
         accs = [[] for _ in C_grid]
         for itr, iva in inner:
             if len(np.unique(y_tr[itr])) < 2:
@@ -317,8 +317,13 @@ def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
             score = float(np.mean(acc)) if acc else -np.inf
             if best is None or score > best[0] + 1e-12:
                 best = (score, param, C)
-    score, param, C = best
-    Ftr, Fte = feats[param]
+    return best
+
+
+def _test(Ftr, Fte, y_tr, y_te, choice):
+    """The outer fit on the whole training fold with the chosen ``(score, param, C)`` and its
+    test accuracy."""
+    score, param, C = choice
     (pred,) = _fit_svms(Ftr, y_tr, [C])(Fte)
     return {
         "accuracy": float(np.mean(pred == y_te)),
@@ -330,26 +335,51 @@ def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
     }
 
 
+def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
+    """:func:`_choose` then :func:`_test`; ``feats`` maps each parameter to its (training,
+    test) features."""
+    choice = _choose({param: tr for param, (tr, _) in feats.items()}, y_tr, inner, C_grid)
+    Ftr, Fte = feats[choice[1]]
+    return _test(Ftr, Fte, y_tr, y_te, choice)
+
+
 def _learner_fold(data, train, test, rep: Representation, encoders, groups, inner_folds,
                   C_grid):
     """One outer fold of every cell of one learner: shared features, then each encoder's CV.
 
-    Patches are extracted and whitened once for all encoders and shared computations run once
-    (:func:`dlsr.features.rectangle_features_multi`). Each encoder's ``seconds`` and
-    ``cpu_seconds`` are its own classifier time plus its share of the features: a computation's
-    CPU time is split evenly between the encoders that read it, the patches and pooling evenly
-    between all (wall time in the same proportions).
+    The training rectangles are encoded for every encoder and parameter of the grids, the
+    inner folds choose each encoder's parameter and C, and the test rectangles are then
+    encoded for the chosen parameters only (a lasso path stops at the chosen penalty, OMP at
+    the chosen number of atoms: the test fold never pays for parameters it does not use).
+    Patches are extracted and whitened once per pass for all encoders and shared computations
+    run once (:func:`dlsr.features.rectangle_features_multi`). Each encoder's ``seconds`` and
+    ``cpu_seconds`` are its own classifier time plus its share of the features: a
+    computation's CPU time is split evenly between the encoders that read it, the patches and
+    pooling evenly between all (wall time in the same proportions).
     """
-    t0, c0 = time.perf_counter(), time.process_time()
     y_tr, y_te = data.labels[train], data.labels[test]
     inner = outer_folds(groups[train], inner_folds)
-    both = np.r_[train, test]
     grids = {enc: ENCODER_GRIDS[enc] for enc in encoders}
     cpu: dict = {}
-    Fs = rectangle_features_multi(data.images[both], data.masks[both], rep, grids,
-                                  polarity=True, cpu_seconds=cpu)
+    own = {enc: [0.0, 0.0] for enc in encoders}  # wall, CPU seconds of its classifiers
+    t0, c0 = time.perf_counter(), time.process_time()
+    Ftr = rectangle_features_multi(data.images[train], data.masks[train], rep, grids,
+                                   polarity=True, cpu_seconds=cpu)
     feature_cpu = time.process_time() - c0
     feature_wall = time.perf_counter() - t0
+    feats_tr, choices = {}, {}
+    for enc in encoders:
+        t1, c1 = time.perf_counter(), time.process_time()
+        feats_tr[enc] = dict(zip(grids[enc], Ftr[enc], strict=True))
+        choices[enc] = _choose(feats_tr[enc], y_tr, inner, tuple(C_grid))
+        own[enc][0] += time.perf_counter() - t1
+        own[enc][1] += time.process_time() - c1
+    t0, c0 = time.perf_counter(), time.process_time()
+    Fte = rectangle_features_multi(data.images[test], data.masks[test], rep,
+                                   {enc: [choices[enc][1]] for enc in encoders},
+                                   polarity=True, cpu_seconds=cpu)
+    feature_cpu += time.process_time() - c0
+    feature_wall += time.perf_counter() - t0
     users: dict = {}
     for enc in encoders:
         method, masked, _, _ = _encoder_plan(rep, enc, grids[enc])
@@ -363,13 +393,10 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
     results = {}
     for enc in encoders:
         t1, c1 = time.perf_counter(), time.process_time()
-        feats = {param: (F[: len(train)], F[len(train):])
-                 for param, F in zip(grids[enc], Fs[enc], strict=True)}
-        res = _choose_and_test(feats, y_tr, y_te, inner, tuple(C_grid))
-        own_cpu = time.process_time() - c1
+        res = _test(feats_tr[enc][choices[enc][1]], Fte[enc][0], y_tr, y_te, choices[enc])
         wall_share = feature_wall * share[enc] / max(feature_cpu, 1e-12)
-        res["seconds"] = time.perf_counter() - t1 + wall_share
-        res["cpu_seconds"] = own_cpu + share[enc]
+        res["seconds"] = own[enc][0] + time.perf_counter() - t1 + wall_share
+        res["cpu_seconds"] = own[enc][1] + time.process_time() - c1 + share[enc]
         results[enc] = res
     return results
 

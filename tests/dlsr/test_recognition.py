@@ -10,10 +10,13 @@ from sklearn.model_selection import GroupKFold, cross_val_score
 
 from dlsr import recognition as rec
 from dlsr.features import (
+    ENCODER_GRIDS,
+    ENCODERS,
     DLSRFeatures,
     fit_representation,
     pack_images,
     rectangle_features,
+    rectangle_features_multi,
 )
 
 SMALL = {"n_atoms": 12, "n_patches": 3000}
@@ -326,3 +329,28 @@ def test_inner_cv_fits_all_C_of_a_fold_at_once(monkeypatch):
     pred = svm.predict(scaler.transform(Fte))
     assert out["predictions"] == pred.tolist()
     assert out["accuracy"] == np.mean(pred == y_te) and out["n_test"] == n_te
+
+
+@pytest.mark.parametrize("learner", ["SC", "OMP"])
+def test_test_fold_encoded_at_the_chosen_parameters_only_gives_the_grids_results(separable,
+                                                                                  learner):
+    """The outer test fold is encoded for the chosen parameters only; the results are exactly
+    those of encoding it over the whole grids (the lasso and OMP paths record solutions
+    without changing course)."""
+    groups = separable.groups("image")
+    train, test = rec.outer_folds(groups, 3, separable.labels)[0]
+    rep = fit_representation(separable.images[train], separable.masks[train], learner,
+                             random_state=0, **SMALL)
+    got = rec._learner_fold(separable, train, test, rep, list(ENCODERS), groups, 2, rec.C_GRID)
+    grids = {enc: ENCODER_GRIDS[enc] for enc in ENCODERS}
+    both = np.r_[train, test]
+    F = rectangle_features_multi(separable.images[both], separable.masks[both], rep, grids)
+    inner = rec.outer_folds(groups[train], 2)
+    y_tr, y_te = separable.labels[train], separable.labels[test]
+    for enc in ENCODERS:
+        feats = {p: (A[: len(train)], A[len(train):]) for p, A in zip(grids[enc], F[enc],
+                                                                    strict=True)}
+        want = rec._choose_and_test(feats, y_tr, y_te, inner, rec.C_GRID)
+        for key in ("encoder_param", "C", "inner_accuracy", "predictions", "accuracy"):
+            assert got[enc][key] == want[key], (enc, key)
+
