@@ -42,27 +42,6 @@ __all__ = ["lasso_path_rows", "omp_path_rows"]
 _FAST = {"reassoc", "contract", "nsz"}  # vectorised sums and FMA; infinities stay exact
 
 
-@njit(nogil=True, cache=True, fastmath={"nnan", "reassoc", "nsz"})
-def _minval(x, n):
-    """Smallest of ``x[:n]`` (``inf`` when ``n == 0``); no NaN in ``x``, so it vectorises."""
-    m = np.inf
-    for i in range(n):
-        m = min(m, x[i])
-    return m
-
-
-@njit(nogil=True, cache=True)
-def _argmin(x, n):
-    """Smallest of ``x[:n]`` and its first index (``inf, -1`` when all are ``inf``)."""
-    m = _minval(x, n)
-    if m == np.inf:
-        return m, -1
-    for i in range(n):
-        if x[i] == m:
-            return m, i
-    return m, -1
-
-
 @njit(nogil=True, cache=True)
 def _mask_entries(m, G, d, idx):
     """The entries a row's masked Gram columns sum over: ``(count, subtract)``, indices in ``idx``.
@@ -86,7 +65,7 @@ def _mask_entries(m, G, d, idx):
 
 
 @njit(nogil=True, cache=True)
-def _argmin4(x, n):
+def _argmin(x, n):
     """Smallest of ``x[:n]`` and its first index (``inf, -1`` when all are ``inf``): four
     independent running minima, so that the comparisons do not wait on each other."""
     m0 = np.inf
@@ -308,7 +287,7 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, rows, slots, ok, max_steps
                 gbuf[j] = min(g1, g2) + pen[j]
             if last_drop >= 0:
                 pen[last_drop] = 0.0
-            gam_in, j_in = _argmin4(gbuf, d)
+            gam_in, j_in = _argmin(gbuf, d)
             # leaving: a coefficient crosses zero
             # (branch-free, so that the divisions vectorise; then the first smallest)
             for a in range(k):
