@@ -58,12 +58,9 @@ def _check_xm(X, M, name="X"):
     return X, M
 
 
-def _group_matrix(n_features):
-    """``(n_features, 4)`` 0/1 matrix assigning each feature to its channel group."""
-    g = _GROUP_OF_CHANNEL[np.arange(n_features) % _N_CHANNELS]
-    G = np.zeros((n_features, len(CHANNEL_GROUPS)))
-    G[np.arange(n_features), g] = 1.0
-    return G, g
+def _feature_groups(n_features):
+    """Channel group (index into :data:`CHANNEL_GROUPS`) of each feature, int64."""
+    return _GROUP_OF_CHANNEL[np.arange(n_features) % _N_CHANNELS].astype(np.int64)
 
 
 def standardize_patches(X, M=None, eps: float = 1e-4):
@@ -90,9 +87,9 @@ def standardize_patches(X, M=None, eps: float = 1e-4):
     dtype = X.dtype
     X2 = np.ascontiguousarray(X.reshape(-1, p))
     M2 = np.ascontiguousarray(M.reshape(-1, p), dtype=bool)
-    _, g = _group_matrix(p)
+    g = _feature_groups(p)
     out = np.empty(X2.shape, dtype=dtype)
-    standardize_rows(X2, M2, g.astype(np.int64), len(CHANNEL_GROUPS), float(eps), out)
+    standardize_rows(X2, M2, g, len(CHANNEL_GROUPS), float(eps), out)
     return out.reshape(shape)
 
 
