@@ -255,14 +255,15 @@ _TASK_COST = {"R": 250, "RP": 190, "SC": 180, "OMP": 150, "GSVQ": 140, "NKM": 14
 
 def _fold_task(key, data, train, test, rep, rep_args, encoders, groups, inner_folds, C_grid):
     """One ``key = (learner, outer fold)`` task: the fold's representation when not given
-    (``rep`` None), then :func:`_learner_fold`. Returns ``(key, rep, fitted_here, cpu seconds,
-    wall seconds, results)``, the seconds those of the representation."""
-    cpu = wall = 0.0
-    fitted = rep is None
-    if fitted:
+    (``rep`` None), then :func:`_learner_fold`. Returns ``(key, fitted, cpu seconds, wall
+    seconds, results)``: ``fitted`` is the representation fitted here (None when it was given)
+    and the seconds are its cost."""
+    fitted, cpu, wall = None, 0.0, 0.0
+    if rep is None:
         rep, cpu, wall = _fold_representation(data, train, key[0], *rep_args)
-    return key, rep, fitted, cpu, wall, _learner_fold(data, train, test, rep, encoders, groups,
-                                                      inner_folds, C_grid)
+        fitted = rep
+    return key, fitted, cpu, wall, _learner_fold(data, train, test, rep, encoders, groups,
+                                                 inner_folds, C_grid)
 
 
 def _fit_svms(F, y, C_grid):
@@ -333,14 +334,6 @@ def _test(Ftr, Fte, y_tr, y_te, choice):
         "inner_accuracy": score,
         "predictions": pred.tolist(),
     }
-
-
-def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
-    """:func:`_choose` then :func:`_test`; ``feats`` maps each parameter to its (training,
-    test) features."""
-    choice = _choose({param: tr for param, (tr, _) in feats.items()}, y_tr, inner, C_grid)
-    Ftr, Fte = feats[choice[1]]
-    return _test(Ftr, Fte, y_tr, y_te, choice)
 
 
 def _learner_fold(data, train, test, rep: Representation, encoders, groups, inner_folds,
@@ -511,9 +504,9 @@ def nested_cv_cells(
     )
     rep_cost = {lrn: [0.0, 0.0] for lrn in learners}  # wall, CPU seconds fitted here
     fold_results: dict = {}
-    for (lrn, k), rep, fitted, cpu, wall, res in results:
+    for (lrn, k), rep, cpu, wall, res in results:
         fold_results[(lrn, k)] = res
-        if fitted:
+        if rep is not None:  # fitted in the task
             reps[(lrn, k)] = rep
             rep_cost[lrn][0] += wall
             rep_cost[lrn][1] += cpu

@@ -22,6 +22,14 @@ from dlsr.features import (
 SMALL = {"n_atoms": 12, "n_patches": 3000}
 
 
+def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
+    """The benchmark's inner choice then outer test, on (training, test) features per
+    parameter."""
+    choice = rec._choose({param: tr for param, (tr, _) in feats.items()}, y_tr, inner, C_grid)
+    Ftr, Fte = feats[choice[1]]
+    return rec._test(Ftr, Fte, y_tr, y_te, choice)
+
+
 def _bar_images(n, vertical, rng):
     """24x24x8 rectangle images with a bright bar across (vertical) or along the crop."""
     img = rng.normal(0, 0.05, size=(n, 24, 24, 8)).astype(np.float32)
@@ -308,7 +316,7 @@ def test_inner_cv_fits_all_C_of_a_fold_at_once(monkeypatch):
         return real_fit(X, y_pm, Cs, **kw)
 
     monkeypatch.setattr(rec, "squared_hinge_fit", counting)
-    out = rec._choose_and_test(feats, y_tr, y_te, inner, C_grid)
+    out = _choose_and_test(feats, y_tr, y_te, inner, C_grid)
     assert calls == [list(C_grid)] * (len(feats) * len(inner)) + [[out["C"]]]
     # the reference: one estimator per (parameter, C, inner fold), as the benchmark did
     best = None
@@ -350,7 +358,7 @@ def test_test_fold_encoded_at_the_chosen_parameters_only_gives_the_grids_results
     for enc in ENCODERS:
         feats = {p: (A[: len(train)], A[len(train):]) for p, A in zip(grids[enc], F[enc],
                                                                     strict=True)}
-        want = rec._choose_and_test(feats, y_tr, y_te, inner, rec.C_GRID)
+        want = _choose_and_test(feats, y_tr, y_te, inner, rec.C_GRID)
         for key in ("encoder_param", "C", "inner_accuracy", "predictions", "accuracy"):
             assert got[enc][key] == want[key], (enc, key)
 
