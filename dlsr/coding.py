@@ -285,14 +285,15 @@ def _slots(where, n_levels):
     return slots, fill
 
 
-def _correlations(X64, D64, mask, given):
+def _correlations(X, D64, mask, given):
     """``(X * mask) @ D.T`` in float64 (``X @ D.T`` without a mask), or the caller's copy."""
-    n, d = X64.shape[0], D64.shape[0]
+    n, d = X.shape[0], D64.shape[0]
     if given is not None:
         B = np.ascontiguousarray(given, dtype=np.float64)
         if B.shape != (n, d):
             raise ValueError(f"correlations must have shape {(n, d)}, got {B.shape}")
         return B
+    X64 = np.asarray(X, dtype=np.float64)
     return (X64 * mask if mask is not None else X64) @ D64.T
 
 
@@ -360,10 +361,9 @@ def lasso_path(
     where = levels.size - 1 - where.ravel()
     if max_steps is None:
         max_steps = 8 * d
-    X64 = np.asarray(X, dtype=np.float64)
     D64 = np.ascontiguousarray(D, dtype=np.float64)
     scale = mask.sum(axis=1) / p if mask is not None else np.ones(n)
-    B_all = _correlations(X64, D64, mask, correlations)
+    B_all = _correlations(X, D64, mask, correlations)
     Dt = np.ascontiguousarray(D64.T)
     G_full = D64 @ D64.T if mask is not None else None
     no_M = np.zeros((1, 1))
@@ -383,9 +383,10 @@ def lasso_path(
             rows = idx[~ok]
             for t, lam_t in enumerate(levels):
                 out[slots[t], rows] = lasso_rowwise(
-                    X64[rows], D64, lam_t, None if mask is None else mask[rows])
+                    np.asarray(X[rows], dtype=np.float64), D64, lam_t,
+                    None if mask is None else mask[rows])
 
-    return fill(_solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
+    return fill(_solve_groups(X, D64, mask, chunk_size, min_group, solver, n_jobs,
                               where.size, dtype))
 
 
@@ -531,10 +532,9 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
     where = where.ravel()
     from dlsr._homotopy import omp_path_rows
 
-    X64 = np.asarray(X, dtype=np.float64)
     D64 = np.ascontiguousarray(D, dtype=np.float64)
     Dt = np.ascontiguousarray(D64.T)
-    B_all = _correlations(X64, D64, mask, correlations)
+    B_all = _correlations(X, D64, mask, correlations)
     G_full = D64 @ D64.T if mask is not None else None
     stops_c = np.minimum(stops, D64.shape[0]).astype(np.int64)
     no_M = np.zeros((1, 1))
@@ -549,7 +549,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
             M = np.ascontiguousarray(op.M, dtype=np.float64)
             omp_path_rows(B, G_full, Dt, M, True, stops_c, out, idx, slots, _TINY)
 
-    return fill(_solve_groups(X64, D64, mask, chunk_size, min_group, solver, n_jobs,
+    return fill(_solve_groups(X, D64, mask, chunk_size, min_group, solver, n_jobs,
                               where.size, dtype))
 
 
