@@ -36,6 +36,7 @@ from joblib import Parallel, delayed
 from sklearn.model_selection import GroupKFold
 from sklearn.pipeline import Pipeline
 
+from ._memory import reused_heap
 from .features import (
     ENCODER_GRIDS,
     ENCODERS,
@@ -259,11 +260,12 @@ def _fold_task(key, data, train, test, rep, rep_args, encoders, groups, inner_fo
     seconds, results)``: ``fitted`` is the representation fitted here (None when it was given)
     and the seconds are its cost."""
     fitted, cpu, wall = None, 0.0, 0.0
-    if rep is None:
-        rep, cpu, wall = _fold_representation(data, train, key[0], *rep_args)
-        fitted = rep
-    return key, fitted, cpu, wall, _learner_fold(data, train, test, rep, encoders, groups,
-                                                 inner_folds, C_grid)
+    with reused_heap():  # the dictionaries, features and classifiers: see dlsr._memory
+        if rep is None:
+            rep, cpu, wall = _fold_representation(data, train, key[0], *rep_args)
+            fitted = rep
+        results = _learner_fold(data, train, test, rep, encoders, groups, inner_folds, C_grid)
+    return key, fitted, cpu, wall, results
 
 
 def _fit_svms(F, y, C_grid):

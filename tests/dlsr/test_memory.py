@@ -53,3 +53,36 @@ def test_overlapping_blocks_in_threads_restore_once_the_last_ends():
         assert multiarray._get_madvise_hugepage() is True
     finally:
         multiarray._set_madvise_hugepage(previous)
+
+
+def _faults_of_second_allocation(nbytes):
+    """Minor page faults taken by filling a fresh array after one of the same size was freed."""
+    resource = pytest.importorskip("resource", reason="page-fault counts need the resource "
+                                   "module (Unix)")
+    np = pytest.importorskip("numpy")
+    with small_pages():  # 4 kB pages: one fault per page, whatever numpy advises
+        a = np.ones(nbytes // 8)
+        del a
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        b = np.ones(nbytes // 8)
+        after = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        del b
+    return after - before
+
+
+def test_reused_heap_keeps_freed_blocks_and_restores_on_leaving():
+    from dlsr import _memory
+
+    if _memory._libc is None:
+        pytest.skip("the C library is not glibc: reused_heap is a no-op there")
+    size = 64 * 2**20  # above glibc's largest mmap threshold (32 MB): mmapped by default
+    pages = size // 4096
+    outside = _faults_of_second_allocation(size)
+    with _memory.reused_heap():
+        with _memory.reused_heap():  # nested
+            _faults_of_second_allocation(size)
+        inside = _faults_of_second_allocation(size)  # the outer block still holds it
+    after = _faults_of_second_allocation(size)
+    assert outside > pages // 2  # a fresh mapping, faulted in again
+    assert inside < pages // 10  # the freed block served again from the heap
+    assert after > pages // 2  # mmap and trimming are back once the last block ended
