@@ -218,10 +218,38 @@ def _n_workers(n_jobs):
     return n_jobs
 
 
-def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs, n_paths, dtype):
+def _check_gram_cache(cache, D64):
+    """``cache`` (a dict or None) ready for masked Gram matrices of ``D64``."""
+    if cache is None:
+        return None
+    if not isinstance(cache, dict):
+        raise TypeError(f"gram_cache must be a dict or None, got {type(cache).__name__}")
+    D0 = cache.setdefault("dictionary", D64)
+    if D0 is not D64 and (D0.shape != D64.shape or not np.array_equal(D0, D64)):
+        raise ValueError("gram_cache holds Gram matrices of another dictionary")
+    return cache
+
+
+def _group_gram(D64, m, cache):
+    """``D diag(m) D^T`` for one mask ``m`` (bool), from ``cache`` when it holds it."""
+    key = None
+    if cache is not None:
+        key = np.packbits(m).tobytes()
+        G = cache.get(key)
+        if G is not None:
+            return G
+    G = (D64 * m.astype(np.float64)) @ D64.T
+    if key is not None:
+        cache[key] = G
+    return G
+
+
+def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs, n_paths, dtype,
+                  gram_cache=None):
     """Run ``solver(rows, op, out)`` over chunks of rows sharing a Gram operator.
 
-    Rows sharing one mask (at least ``min_group`` of them) get that mask's Gram matrix; the rest
+    Rows sharing one mask (at least ``min_group`` of them) get that mask's Gram matrix (kept in
+    ``gram_cache`` when given, for the next masked solve on the same dictionary); the rest
     get per-row masked products. With ``n_jobs > 1`` chunks run in threads (numpy and the
     compiled kernels release the GIL) with single-threaded BLAS in each. ``solver`` writes the
     codes of its rows into ``out``, of shape ``(n_paths, n, d)``, zero-initialised and returned
@@ -237,10 +265,8 @@ def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs, n_paths, dt
         ops = [_SharedGram(D64 @ D64.T)]
     else:
         groups, rest = _group_by_mask(mask, min_group)
-        ops = []
-        for rows in groups:
-            m = mask[rows[0]].astype(np.float64)
-            ops.append(_SharedGram((D64 * m) @ D64.T))
+        cache = _check_gram_cache(gram_cache, D64)
+        ops = [_SharedGram(_group_gram(D64, mask[rows[0]], cache)) for rows in groups]
     tasks = []
     for rows, op in zip(groups, ops, strict=True):
         for sl in _chunks(rows.size, chunk_size):
@@ -308,7 +334,7 @@ def _check_lams(lam, name="lam"):
 
 def lasso_path(
     X, D, lams, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP, dtype=np.float32,
-    max_steps=None, correlations=None,
+    max_steps=None, correlations=None, gram_cache=None,
 ):
     """Lasso codes of every row of ``X`` for several penalties, from one homotopy path.
 
@@ -344,6 +370,11 @@ def lasso_path(
         ``(X * mask) @ D.T`` (``X @ D.T`` without a mask), when the caller already has it:
         encoders sharing patches share this product (with masked entries of ``X`` already 0,
         the masked and unmasked products are the same array).
+    gram_cache : dict, optional
+        The Gram matrices of groups of rows sharing a mask, by mask, kept for the next masked
+        call on the same dictionary: the masked lasso and the masked OMP of the same patches
+        form the same ones (about 4 % of the two on a chunk of real patches). It refuses
+        another dictionary; without a mask it is not used.
 
     Returns
     -------
@@ -387,7 +418,7 @@ def lasso_path(
                     None if mask is None else mask[rows])
 
     return fill(_solve_groups(X, D64, mask, chunk_size, min_group, solver, n_jobs,
-                              where.size, dtype))
+                              where.size, dtype, gram_cache))
 
 
 def lasso(
@@ -503,7 +534,7 @@ def omp_rowwise(X, D, n_nonzero, mask=None):
 
 
 def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP,
-             dtype=np.float32, correlations=None):
+             dtype=np.float32, correlations=None, gram_cache=None):
     """OMP codes for several numbers of atoms from one greedy run.
 
     OMP's selection does not depend on the final number of atoms, so one run to the largest
@@ -516,7 +547,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
     n_nonzeros : int or sequence of int
         Numbers of atoms, >= 1, in any order.
     mask : array-like of shape (n, p), bool, optional
-    n_jobs, chunk_size, min_group, dtype, correlations
+    n_jobs, chunk_size, min_group, dtype, correlations, gram_cache
         As in :func:`lasso_path`.
 
     Returns
@@ -550,7 +581,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
             omp_path_rows(B, G_full, Dt, M, True, stops_c, out, idx, slots, _TINY)
 
     return fill(_solve_groups(X, D64, mask, chunk_size, min_group, solver, n_jobs,
-                              where.size, dtype))
+                              where.size, dtype, gram_cache))
 
 
 def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP,

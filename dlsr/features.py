@@ -287,18 +287,21 @@ def _encoder_plan(rep: Representation, encoder: str, params):
 
 
 def _method_codes(X, M, rep: Representation, method: str, masked: bool, values,
-                  correlations=None) -> list:
+                  correlations=None, gram_cache=None) -> list:
     """Codes of one computation for each of ``values`` (in that order), unsplit.
 
     ``correlations``, optional, is ``X @ D.T`` in float64, shared by the lasso and OMP
-    computations (masked or not: masked entries of ``X`` are 0).
+    computations (masked or not: masked entries of ``X`` are 0); ``gram_cache``, optional, the
+    masked Gram matrices shared by the masked lasso and OMP.
     """
     D = rep.dictionary
     mask = M if masked else None
     if method == "lasso":
-        return list(coding.lasso_path(X, D, values, mask=mask, correlations=correlations))
+        return list(coding.lasso_path(X, D, values, mask=mask, correlations=correlations,
+                                      gram_cache=gram_cache))
     if method == "omp":
-        return list(coding.omp_path(X, D, values, mask=mask, correlations=correlations))
+        return list(coding.omp_path(X, D, values, mask=mask, correlations=correlations,
+                                    gram_cache=gram_cache))
     if method == "threshold":
         return list(coding.soft_threshold_path(X, D, values))
     atoms = rep.centroids if rep.centroids is not None else D
@@ -366,6 +369,7 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
         bucket = needed.setdefault((method, masked), [])
         bucket.extend(v for v in values if v not in bucket)
     codes = {}
+    grams: dict = {}  # the masked Gram matrices of mask groups, for the masked lasso and OMP
     B = None  # X @ D.T in float64, computed once for every lasso and OMP computation
     zero_masked = None  # masked ones too, when the masked entries of X are 0 (they should be)
     for (method, masked), values in needed.items():
@@ -379,8 +383,8 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
                     D64 = np.asarray(rep.dictionary, dtype=np.float64)
                     B = np.asarray(X, dtype=np.float64) @ D64.T
                 shared = B
-        for v, A in zip(values, _method_codes(X, M, rep, method, masked, values, shared),
-                        strict=True):
+        for v, A in zip(values, _method_codes(X, M, rep, method, masked, values, shared,
+                                              grams if masked else None), strict=True):
             codes[(method, masked, v)] = A
         if cpu_seconds is not None:
             key = (method, masked)

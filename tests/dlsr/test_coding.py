@@ -226,6 +226,30 @@ def test_paths_read_given_correlations(real_patches, path):
         fn(X, D, grid, correlations=np.zeros((len(X) + 1, D.shape[0])))
 
 
+@pytest.mark.parametrize("path", ["lasso", "omp"])
+def test_gram_cache_keeps_each_mask_groups_gram_matrix(real_patches, path):
+    """Rows sharing a mask read ``D diag(m) D^T`` from the cache when it holds it: the same codes
+    as without a cache, other codes from other matrices, and no other dictionary."""
+    X, M, D = real_patches
+    patterns = M[:3]
+    M = patterns[np.arange(120) % 3]
+    X = np.where(M, X[:120], 0.0)
+    fn, grid = (lasso_path, [1.0, 2.0]) if path == "lasso" else (omp_path, [1, 5])
+    cache = {}
+    codes = fn(X, D, grid, mask=M, min_group=10, gram_cache=cache)
+    assert len(cache) == 1 + len(patterns)  # the dictionary, one matrix per mask
+    for m in patterns:
+        np.testing.assert_allclose(cache[np.packbits(m).tobytes()], (D * m) @ D.T)
+    np.testing.assert_array_equal(codes, fn(X, D, grid, mask=M, min_group=10))
+    np.testing.assert_array_equal(codes, fn(X, D, grid, mask=M, min_group=10, gram_cache=cache))
+    halved = {k: (v if k == "dictionary" else 0.5 * v) for k, v in cache.items()}
+    assert not np.allclose(fn(X, D, grid, mask=M, min_group=10, gram_cache=halved), codes)
+    with pytest.raises(ValueError, match="another dictionary"):
+        fn(X, 2 * D, grid, mask=M, min_group=10, gram_cache=cache)
+    with pytest.raises(TypeError, match="gram_cache"):
+        fn(X, D, grid, mask=M, gram_cache=[])
+
+
 @pytest.mark.parametrize("masked", [False, True])
 def test_paths_do_not_depend_on_the_other_requested_values(real_patches, masked):
     """A penalty's (a number of atoms') codes are the same bit for bit alone or among others:
