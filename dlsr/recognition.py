@@ -127,7 +127,7 @@ class RecognitionData:
 
 def recognition_data(
     samples, size: int = 24, negatives_per_image: int | None = None, random_state=0,
-    extra_negatives=None,
+    extra_negatives=None, max_rectangles: int | None = None, subset_random_state=0,
 ) -> RecognitionData:
     """Rectangle images of every labelled rectangle of ``samples``.
 
@@ -147,6 +147,11 @@ def recognition_data(
         ones included); they are appended to that image's negatives (detection training adds
         negatives from the detector's candidate grid this way,
         :func:`dlsr.detection.detection_training_data`).
+    max_rectangles : int or None
+        Keep this many of the labelled rectangles (all when None or more): drawn without
+        replacement by ``numpy.random.default_rng(subset_random_state).choice`` over all of
+        them and kept in their order. Only their images are computed.
+    subset_random_state : int or None
 
     Returns
     -------
@@ -157,7 +162,7 @@ def recognition_data(
     from .rectangles import array_to_rects
 
     rng = np.random.default_rng(random_state)
-    images, masks, labels, image_ids, object_ids = [], [], [], [], []
+    labelled = []  # (sample, rectangles, labels) per image
     for s in samples:
         negs = list(s.negatives)
         if not negs and s.positives:
@@ -171,14 +176,30 @@ def recognition_data(
         if not rects:
             log.warning("image %s (%s) has no rectangles: skipped", s.image_id, s.source)
             continue
-        im, mk = rectangle_images(s.rgb, s.depth, s.depth_valid, rects, size=size)
+        labelled.append((s, rects, np.r_[np.ones(len(s.positives), int),
+                                         np.zeros(len(negs), int)]))
+    if not labelled:
+        raise ValueError("the dataset has no labelled rectangles")
+    total = sum(len(rects) for _, rects, _ in labelled)
+    keep = np.ones(total, dtype=bool)
+    if max_rectangles is not None and max_rectangles < total:
+        keep[:] = False
+        keep[np.random.default_rng(subset_random_state).choice(total, max_rectangles,
+                                                               replace=False)] = True
+    images, masks, labels, image_ids, object_ids = [], [], [], [], []
+    start = 0
+    for s, rects, y in labelled:
+        sel = np.flatnonzero(keep[start:start + len(rects)])
+        start += len(rects)
+        if not sel.size:
+            continue
+        im, mk = rectangle_images(s.rgb, s.depth, s.depth_valid, [rects[i] for i in sel],
+                                  size=size)
         images.append(im)
         masks.append(mk)
-        labels.append(np.r_[np.ones(len(s.positives), int), np.zeros(len(negs), int)])
-        image_ids += [s.image_id] * len(rects)
-        object_ids += [s.object_id] * len(rects)
-    if not images:
-        raise ValueError("the dataset has no labelled rectangles")
+        labels.append(y[sel])
+        image_ids += [s.image_id] * sel.size
+        object_ids += [s.object_id] * sel.size
     return RecognitionData(
         np.concatenate(images), np.concatenate(masks), np.concatenate(labels),
         np.asarray(image_ids, dtype=object), np.asarray(object_ids, dtype=object),

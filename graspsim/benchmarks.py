@@ -36,14 +36,6 @@ def load_samples(data, format: str, scale: float | None = None, mapping=None):
     return samples
 
 
-def _subset(data: rec.RecognitionData, n: int, seed: int) -> rec.RecognitionData:
-    if n >= len(data):
-        return data
-    idx = np.sort(np.random.default_rng(seed).choice(len(data), n, replace=False))
-    return rec.RecognitionData(data.images[idx], data.masks[idx], data.labels[idx],
-                               data.image_ids[idx], data.object_ids[idx])
-
-
 def recognition_benchmark(
     data, format: str, out, scale=None, mapping=None, learners=None, encoders=None,
     n_atoms=300, n_patches=100_000, split="image", n_folds=5, inner_folds=5,
@@ -52,9 +44,8 @@ def recognition_benchmark(
 ) -> dict:
     """Load ``data`` and run :func:`dlsr.recognition.run_recognition_benchmark`."""
     samples = load_samples(data, format, scale, mapping)
-    rd = rec.recognition_data(samples, random_state=seed)
-    if max_rectangles is not None:
-        rd = _subset(rd, max_rectangles, seed)
+    rd = rec.recognition_data(samples, random_state=seed, max_rectangles=max_rectangles,
+                              subset_random_state=seed)
     log.info("%d rectangles (%d positive) from %d images", len(rd), int(rd.labels.sum()),
              len(samples))
     extra = None

@@ -270,6 +270,21 @@ def test_cells_together_equal_cells_alone(separable):
     assert all(f["cpu_seconds"] > 0 for c in together for f in c["folds"])
 
 
+def test_a_subset_of_rectangles_is_the_same_draw_from_all_of_them(box_samples):
+    """``max_rectangles`` draws from all the labelled rectangles and computes only their
+    images: the same data as taking those rows of the whole set."""
+    samples = box_samples(4)
+    full = rec.recognition_data(samples, random_state=3)
+    k = len(full) // 2
+    sub = rec.recognition_data(samples, random_state=3, max_rectangles=k, subset_random_state=7)
+    idx = np.sort(np.random.default_rng(7).choice(len(full), k, replace=False))
+    assert len(sub) == k and len(set(sub.image_ids)) > 1
+    for field in ("images", "masks", "labels", "image_ids", "object_ids"):
+        np.testing.assert_array_equal(getattr(sub, field), getattr(full, field)[idx])
+    everything = rec.recognition_data(samples, random_state=3, max_rectangles=10 * len(full))
+    np.testing.assert_array_equal(everything.images, full.images)
+
+
 def test_bad_input_is_a_clear_error(separable):
     one_class = rec.RecognitionData(separable.images[:60], separable.masks[:60],
                                     separable.labels[:60], separable.image_ids[:60],
