@@ -161,6 +161,8 @@ def recognition_data(
     from .preprocess import rectangle_images
     from .rectangles import array_to_rects
 
+    if max_rectangles is not None and int(max_rectangles) < 1:
+        raise ValueError(f"max_rectangles must be at least 1, got {max_rectangles!r}")
     rng = np.random.default_rng(random_state)
     labelled = []  # (sample, rectangles, labels) per image
     for s in samples:

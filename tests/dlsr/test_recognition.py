@@ -283,6 +283,8 @@ def test_a_subset_of_rectangles_is_the_same_draw_from_all_of_them(box_samples):
         np.testing.assert_array_equal(getattr(sub, field), getattr(full, field)[idx])
     everything = rec.recognition_data(samples, random_state=3, max_rectangles=10 * len(full))
     np.testing.assert_array_equal(everything.images, full.images)
+    with pytest.raises(ValueError, match="max_rectangles"):
+        rec.recognition_data(samples, max_rectangles=0)
 
 
 def test_bad_input_is_a_clear_error(separable):
