@@ -419,6 +419,15 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
     return results
 
 
+def _blas_libraries() -> list[dict]:
+    """The BLAS libraries of this process (the workers inherit its environment): library,
+    version and the kernels it runs (OpenBLAS's ``architecture``: its core type)."""
+    from ._threads import controller
+
+    return [{k: lib.get(k) for k in ("internal_api", "version", "architecture")}
+            for lib in controller().info() if lib.get("user_api") == "blas"]
+
+
 def _check_names(learners, encoders):
     for name in learners:
         if name not in LEARNERS:
@@ -726,7 +735,7 @@ def run_recognition_benchmark(
         "config": config,
         "key": keys[0],
         "machine": {"platform": platform.platform(), "processor": platform.processor(),
-                    "python": platform.python_version()},
+                    "python": platform.python_version(), "blas": _blas_libraries()},
         "seconds_this_run": time.perf_counter() - t0,
         "cpu_seconds_this_run": float(sum(r.get("cpu_seconds", 0.0) for r in computed)),
         "n_jobs": n_jobs,

@@ -192,6 +192,9 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
             == {(c["learner"], c["accuracy"]) for c in first["cells"]})
     saved = json.loads((tmp_path / "recognition.json").read_text())
     assert len(saved["cells"]) == 2
+    # the machine's BLAS (its kernels weigh on the run's time) is recorded with it
+    blas = saved["machine"]["blas"]
+    assert blas and all(lib["internal_api"] and "architecture" in lib for lib in blas)
     # Another configuration in the same folder does not reuse those cells.
     calls.clear()
     rec.run_recognition_benchmark(separable, tmp_path, **{**kw, "learners": ["NKM"],
