@@ -379,18 +379,25 @@ def lasso_path_rows(B, lams, G, Dt, M, use_mask, out, rows, slots, ok, max_steps
             pen[jn] = np.inf
             k += 1
             if step % 16 == 15:  # re-synchronise the correlations
-                for q in range(d):
-                    c[q] = b[q]
-                for a in range(k):
-                    ca = coef[a]
-                    for q in range(d):
-                        c[q] -= ca * Gc[a, q]
+                _correlations(k, b, coef, Gc, c)
         if not finished:
             ok[i] = False
         for a in range(k):
             pen[act[a]] = 0.0
         for x in range(n_excl):
             pen[excluded[x]] = 0.0
+
+
+@njit(nogil=True, cache=True, fastmath=_FAST)
+def _correlations(k, b, coef, Gc, c):
+    """``c = b - G_A coef``: the correlations of the residual of the ``k`` atoms' coefficients
+    (their Gram columns ``Gc[:k]``), in float64."""
+    for q in range(c.shape[0]):
+        c[q] = b[q]
+    for a in range(k):
+        ca = coef[a]
+        for q in range(c.shape[0]):
+            c[q] -= ca * Gc[a, q]
 
 
 @njit(nogil=True, cache=True, fastmath=_FAST)
@@ -408,12 +415,7 @@ def _snapshot(k, act, sgn, b, lam, Ginv, Gc, rtol, coef, c, v, res):
             s += Ginv[a, bb] * v[bb]
         coef[a] = s
     _refine(k, act, v, Gc, Ginv, coef, res)
-    for q in range(d):
-        c[q] = b[q]
-    for a in range(k):
-        ca = coef[a]
-        for q in range(d):
-            c[q] -= ca * Gc[a, q]
+    _correlations(k, b, coef, Gc, c)
     tol = rtol * max(lam, 1.0)
     for a in range(k):
         if coef[a] * sgn[a] < -tol or abs(c[act[a]] - lam * sgn[a]) > tol:
@@ -577,12 +579,7 @@ def omp_path_rows(B, G, Dt, M, use_mask, stops, out, rows, slots, tiny):
                         out[slots[si], rows[i], act[s]] = cs[s]
                     si += 1
             if k < L:
-                for a in range(d):
-                    c[a] = b[a]
-                for s in range(k):
-                    w = coef[s]
-                    for a in range(d):
-                        c[a] -= w * Gc[s, a]
+                _correlations(k, b, coef, Gc, c)
         # stopped early: later stops keep its last solution (refined once)
         if si < n_stops and k > 0 and not (si > 0 and stops[si - 1] == k):
             _refined_copy(k, act, b, Gc, Ginv, coef, rhs, res, cs)
