@@ -1,0 +1,66 @@
+"""Detection in one RGB-D image read from files (:func:`detect_files`, the ``graspsim detect``
+command).
+
+Part of :mod:`dlsr.detection`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .model import DLSRDetector
+
+
+def detect_files(model, rgb, depth, mask=None, background=None, depth_units: float = 1.0,
+                 detector: str | None = None, top_k: int = 5, out=None, **options):
+    """Detect grasps in one RGB-D image read from files (the ``graspsim detect`` command).
+
+    Parameters
+    ----------
+    model : DLSRDetector or path
+        A model or the path of a saved one.
+    rgb : path
+        Colour image (PNG, ...).
+    depth : path
+        Depth image (float TIFF in metres, or ``.npy``); values <= 0 or non-finite are missing.
+    mask, background : path or None
+        Object mask (non-zero = object) or background image for the object region.
+    depth_units : float
+        Multiplies the depth file's values to give metres (e.g. 0.001 for millimetres).
+    detector : {"dense", "exact"} or None
+        None: the model's saved choice.
+    top_k : int
+    out : path or None
+        Overlay PNG with the detections (best drawn last).
+    **options :
+        Passed to the detector (``coarse_to_fine``, ``rescore``, ``region``).
+
+    Returns
+    -------
+    Detection
+    """
+    if not isinstance(model, DLSRDetector):
+        model = DLSRDetector.load(model)
+    from ..datasets import clean_depth, read_depth_image, read_gray, read_rgb
+
+    rgb_arr = read_rgb(rgb)
+    d, valid = clean_depth(read_depth_image(depth))
+    if d.shape != rgb_arr.shape[:2]:
+        raise ValueError(f"depth {depth} has shape {d.shape}, the image {rgb} "
+                         f"{rgb_arr.shape[:2]}")
+    obs = {"rgb": rgb_arr, "depth": d * np.float32(depth_units), "depth_valid": valid}
+    if mask is not None:
+        obs["mask"] = read_gray(mask) > 0
+    bg = None if background is None else read_rgb(background)
+    det = model.detector(detector, top_k=top_k, background=bg, **options).detect(obs)
+    if out is not None:
+        from PIL import Image
+
+        from ..viz import draw_rectangles
+
+        img = draw_rectangles(rgb_arr, det.rects[:1], negatives=det.rects[1:][::-1])
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(img).save(out)
+    return det
