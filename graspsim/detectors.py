@@ -1,18 +1,30 @@
-"""Baseline grasp detectors and the detector loader.
+"""The detector protocol, the baseline detectors and the detector loader.
 
-A detector is anything with ``predict(obs) -> list[GraspRectangle]``, best first. ``obs`` is the
-environment's observation dict (``rgb`` uint8 (H, W, 3), ``depth`` float32 (H, W) metres,
-``depth_valid`` (H, W)); the trial harness adds ``seed`` (an int for stochastic detectors) and,
-when the scene was labelled, ``positives`` (physics-labelled positives ranked best first).
+A detector is any object with ``predict(obs)`` (the :class:`GraspDetector` protocol below, which
+documents the observation and the accepted return values); :func:`check_detections` validates
+what it returns. Built-in detectors:
 
 * ``random``: a uniformly random rectangle anywhere in the image (succeeds rarely).
 * ``mask-pca``: segments the object from depth alone (the table plane is fitted in ``1/z``, which
   is linear in the pixel coordinates for any plane, so no intrinsics are needed), then grasps at
   the mask centroid across its minor axis, opening = the mask's extent there plus a margin.
 * ``oracle``: the best physics-labelled positive (needs ``obs["positives"]``).
+
+Plug-ins (:func:`load_detector`): ``"package.module:NAME"`` imports ``NAME`` (a class or a
+factory called with no argument, or an object with ``predict``) from a module on ``sys.path``
+or in the current folder; installed packages can register names in the entry-point group
+``graspsim.detectors`` (see :data:`ENTRY_POINT_GROUP`).
 """
 
 from __future__ import annotations
+
+import importlib
+import os
+import re
+import sys
+from collections.abc import Mapping
+from importlib.metadata import entry_points
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -21,13 +33,140 @@ from dlsr.rectangles import GraspRectangle
 from .labelling import extent_along, mask_axes
 
 __all__ = [
+    "GraspDetector",
+    "check_detections",
+    "PluginDetector",
+    "ENTRY_POINT_GROUP",
     "RandomDetector",
     "MaskPCADetector",
     "OracleDetector",
     "DETECTORS",
     "load_detector",
+    "check_detector",
+    "plugin_names",
     "object_mask_from_depth",
 ]
+
+
+@runtime_checkable
+class GraspDetector(Protocol):
+    """What the trial harness, ``graspsim trials --detector`` and ``graspsim run`` accept.
+
+    ``predict(obs)`` is called once per grasp attempt, in the process that runs the trial (a
+    worker process with ``--jobs`` > 1), and must not modify ``obs``.
+
+    Observation ``obs`` (a dict; every array is the harness's own copy):
+
+    * ``rgb``: ndarray of shape (H, W, 3), uint8, RGB.
+    * ``depth``: ndarray of shape (H, W), float32, metres along the optical axis (z, not ray
+      length), 0 where the simulated sensor has no reading; never NaN.
+    * ``depth_valid``: ndarray of shape (H, W), uint8, 1 where ``depth`` holds a reading.
+    * ``K``: ndarray of shape (3, 3), float64, the pinhole camera matrix in pixels
+      (``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``; pixel centres at integer coordinates).
+    * ``T_world_cam``: ndarray of shape (4, 4), float64, the camera pose: it maps points in the
+      camera frame (OpenCV: x right, y down, z forward along the optical axis; metres) to the
+      world frame (z up; the table top is the plane z = 0).
+    * ``seed``: int, a seed for a stochastic detector
+      (``np.random.default_rng(obs["seed"])``), so that results repeat across runs and workers.
+    * ``positives``: list of GraspRectangle, best first, only when the scene was labelled by
+      physics (the trial's ``n_candidates > 0``): the labelling's successful rectangles, for
+      oracles. A detector that needs them sets a class attribute ``requires_labels = True``.
+
+    Return value, best first (the harness executes the first rectangle):
+
+    * a list of :class:`~dlsr.rectangles.GraspRectangle`; or
+    * an array of shape (n, 5), rows ``(x, y, theta, w, h)``: centre column and row (pixels),
+      closing direction in radians counter-clockwise as displayed, opening ``w`` and jaw size
+      ``h`` (pixels, > 0) -- the project's rectangle convention (``CONTRIBUTING.md``); or
+    * a tuple ``(rectangles, scores)`` of either form above and an array of shape (n,) of
+      finite floats (higher = better, in the detector's own units). The order of
+      ``rectangles`` is the ranking; the scores are recorded (the executed grasp's ``score``)
+      and not used to reorder.
+
+    An empty list or an array of shape (0, 5) means "no grasp proposed". Anything else (another
+    type, a wrong shape, NaN or infinite values, a non-positive ``w`` or ``h``, scores of
+    another length) stops the run with a one-line error; an exception raised by ``predict``
+    is recorded as that trial's failure (``"detector error: TypeName: message"``).
+    """
+
+    def predict(self, obs: Mapping[str, Any]) -> Any:
+        ...
+
+
+def check_detections(result, name: str = "detector"):
+    """Validate what a detector's ``predict`` returned (see :class:`GraspDetector`).
+
+    Parameters
+    ----------
+    result : list of GraspRectangle, array-like of shape (n, 5), or (rectangles, scores)
+    name : str
+        The detector's name, for error messages.
+
+    Returns
+    -------
+    rects : list of GraspRectangle
+        In the detector's order (best first); empty when nothing was proposed.
+    scores : ndarray of shape (n,), float64, or None
+        None when the detector gave no scores.
+
+    Raises
+    ------
+    ValueError
+        One line naming the detector and what is wrong with its return value.
+    """
+    scores = None
+    if isinstance(result, tuple):
+        if len(result) != 2:
+            raise ValueError(f"detector {name!r} returned a tuple of {len(result)} items; "
+                             "expected (rectangles, scores)")
+        result, scores = result
+    if isinstance(result, list | tuple):
+        bad = [i for i, r in enumerate(result) if not isinstance(r, GraspRectangle)]
+        if bad:
+            raise ValueError(
+                f"detector {name!r} returned a list whose item {bad[0]} is a "
+                f"{type(result[bad[0]]).__name__}, not a GraspRectangle (return a list of "
+                "GraspRectangle or an (n, 5) array)"
+            )
+        rects = list(result)
+    elif isinstance(result, np.ndarray) or hasattr(result, "__array__"):
+        arr = np.asarray(result)
+        if arr.dtype == bool or not np.issubdtype(arr.dtype, np.number) \
+                or np.issubdtype(arr.dtype, np.complexfloating):
+            raise ValueError(f"detector {name!r} returned an array of dtype {arr.dtype}; "
+                             "expected real numbers (x, y, theta, w, h)")
+        if arr.ndim != 2 or arr.shape[1] != 5:
+            raise ValueError(f"detector {name!r} returned an array of shape {arr.shape}; "
+                             "expected (n, 5) rows (x, y, theta, w, h)")
+        arr = arr.astype(np.float64)
+        bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+        if bad.size:
+            raise ValueError(f"detector {name!r} returned non-finite values in row {bad[0]}: "
+                             f"{arr[bad[0]].tolist()}")
+        bad = np.flatnonzero((arr[:, 3] <= 0) | (arr[:, 4] <= 0))
+        if bad.size:
+            raise ValueError(f"detector {name!r} returned a non-positive opening or jaw size "
+                             f"in row {bad[0]}: {arr[bad[0]].tolist()}")
+        rects = [GraspRectangle(*row) for row in arr]
+    else:
+        raise ValueError(
+            f"detector {name!r} returned a {type(result).__name__}; expected a list of "
+            "GraspRectangle, an (n, 5) array, or a (rectangles, scores) tuple"
+        )
+    if scores is not None:
+        s = np.asarray(scores)
+        if s.dtype == bool or not np.issubdtype(s.dtype, np.number) \
+                or np.issubdtype(s.dtype, np.complexfloating):
+            raise ValueError(f"detector {name!r} returned scores of dtype {s.dtype}; "
+                             "expected real numbers")
+        if s.shape != (len(rects),):
+            raise ValueError(f"detector {name!r} returned scores of shape {s.shape} for "
+                             f"{len(rects)} rectangles; expected ({len(rects)},)")
+        s = s.astype(np.float64)
+        if not np.all(np.isfinite(s)):
+            raise ValueError(f"detector {name!r} returned non-finite scores: {s.tolist()}")
+        scores = s
+    return rects, scores
 
 
 class RandomDetector:
@@ -140,30 +279,229 @@ DETECTORS = {
 }
 
 
+ENTRY_POINT_GROUP = "graspsim.detectors"
+"""Entry-point group in which installed packages register detector names: in a package's
+``pyproject.toml``, ``[project.entry-points."graspsim.detectors"]`` then
+``mynet = "mypkg.detect:MyDetector"``; ``--detector mynet`` then loads it."""
+
+# ``package.module:NAME`` (NAME may be dotted: ``module:Class.factory``), as entry points write it.
+_SPEC = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
+
+
+class PluginDetector:
+    """A detector loaded from a plug-in (``module:NAME`` or an entry-point name).
+
+    It predicts with the loaded object and pickles as its name and the folder its module came
+    from, so a worker process (loky, Ray) imports the plug-in again, once per process, even
+    when that folder is not on the worker's ``sys.path``.
+
+    Parameters
+    ----------
+    spec : str
+        What was asked for (``"mydet:Detector"`` or an entry-point name).
+    detector : object with ``predict(obs)``
+    path : str or None
+        Folder to put on ``sys.path`` before importing in another process.
+    """
+
+    def __init__(self, spec, detector, path=None):
+        self.spec = spec
+        self.detector = detector
+        self.path = path
+
+    @property
+    def requires_labels(self) -> bool:
+        return bool(getattr(self.detector, "requires_labels", False))
+
+    def predict(self, obs):
+        return self.detector.predict(obs)
+
+    def __repr__(self):
+        return f"PluginDetector({self.spec!r})"
+
+    def __reduce__(self):
+        return (_plugin_in_worker, (self.spec, self.path))
+
+
+_WORKER_PLUGINS: dict = {}
+
+
+def _plugin_in_worker(spec, path):
+    """Unpickling a :class:`PluginDetector`: import it (once per process) from ``path`` too."""
+    key = (spec, path, os.getpid())
+    det = _WORKER_PLUGINS.get(key)
+    if det is None:
+        if path is not None and path not in sys.path:
+            sys.path.append(path)
+            importlib.invalidate_caches()
+        det = load_detector(spec)
+        _WORKER_PLUGINS[key] = det
+    return det
+
+
+def _module_folder(module) -> str | None:
+    """The ``sys.path`` entry a top-level module or package was imported from."""
+    top = sys.modules.get(module.__name__.split(".")[0], module)
+    origin = getattr(top, "__file__", None)
+    if origin is None:
+        return None
+    folder = os.path.dirname(os.path.abspath(origin))
+    return os.path.dirname(folder) if hasattr(top, "__path__") else folder
+
+
+def _import_module(spec: str, module_name: str):
+    """Import ``module_name``, retrying with the current folder on ``sys.path``."""
+    def missing(exc):  # the plug-in's own module is absent (not one of its imports)
+        return exc.name is not None and (module_name == exc.name
+                                         or module_name.startswith(exc.name + "."))
+
+    for attempt in (0, 1):
+        try:
+            return importlib.import_module(module_name)
+        except ModuleNotFoundError as exc:
+            if not missing(exc):
+                raise ValueError(f"detector {spec!r}: importing {module_name!r} failed: "
+                                 f"ModuleNotFoundError: {exc}") from exc
+            cwd = os.getcwd()
+            if attempt or cwd in sys.path:
+                raise ValueError(
+                    f"detector {spec!r}: no module named {exc.name!r} (looked in the current "
+                    f"folder {cwd} and on sys.path)"
+                ) from exc
+            sys.path.append(cwd)  # like `python -m`, but installed modules keep precedence
+            importlib.invalidate_caches()
+        except Exception as exc:
+            raise ValueError(f"detector {spec!r}: importing {module_name!r} failed: "
+                             f"{type(exc).__name__}: {exc}") from exc
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _instantiate(spec: str, obj, what: str):
+    """A class or factory is called with no argument; an object with ``predict`` is used."""
+    if isinstance(obj, type) or (callable(obj) and not hasattr(obj, "predict")):
+        try:
+            obj = obj()
+        except Exception as exc:
+            raise ValueError(f"detector {spec!r}: calling {what}() failed (NAME must be a class "
+                             f"or a factory taking no argument): {type(exc).__name__}: "
+                             f"{exc}") from exc
+    if not callable(getattr(obj, "predict", None)):
+        raise ValueError(f"detector {spec!r}: {what} gave a {type(obj).__name__} with no "
+                         "predict(obs) method")
+    return obj
+
+
+def _resolve_spec(spec: str):
+    """Import ``module`` of ``module:NAME`` and return ``(NAME's object, module)``."""
+    module_name, _, attr = spec.partition(":")
+    module = _import_module(spec, module_name)
+    obj = module
+    for part in attr.split("."):
+        if not hasattr(obj, part):
+            where = getattr(module, "__file__", None) or module_name
+            raise ValueError(f"detector {spec!r}: module {module_name!r} ({where}) has no "
+                             f"attribute {attr!r}")
+        obj = getattr(obj, part)
+    return obj, module
+
+
+def _load_spec(spec: str) -> PluginDetector:
+    obj, module = _resolve_spec(spec)
+    return PluginDetector(spec, _instantiate(spec, obj, spec.partition(":")[2]),
+                          _module_folder(module))
+
+
+def plugin_names() -> dict:
+    """Installed detector plug-ins: ``{name: "module:NAME"}`` of the entry-point group."""
+    return {ep.name: ep.value for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def _load_entry_point(name: str) -> PluginDetector | None:
+    eps = [ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name == name]
+    if not eps:
+        return None
+    ep = eps[0]
+    try:
+        obj = ep.load()
+    except Exception as exc:
+        raise ValueError(f"detector {name!r}: loading the entry point {ep.value!r} "
+                         f"({ENTRY_POINT_GROUP}) failed: {type(exc).__name__}: {exc}") from exc
+    module = sys.modules.get(ep.value.partition(":")[0].strip())
+    return PluginDetector(name, _instantiate(name, obj, ep.value),
+                          None if module is None else _module_folder(module))
+
+
 def load_detector(name_or_path):
-    """A detector from a built-in name or a saved DLSR model.
+    """A detector from a built-in name, a plug-in, or a saved DLSR model.
 
     Parameters
     ----------
     name_or_path : str or Path
-        ``"random"``, ``"mask-pca"``, ``"oracle"``, or the path of a model saved by
+        In this order: ``"random"``, ``"mask-pca"``, ``"oracle"``; ``"package.module:NAME"``
+        (a class or a no-argument factory, or an object with ``predict``; the module is looked
+        up on ``sys.path``, then in the current folder); a name registered by an installed
+        package in the entry-point group ``graspsim.detectors``; the path of a model saved by
         :meth:`dlsr.detection.DLSRDetector.save` (``.npz`` + ``.json``, with or without the
-        suffix); it detects with the options saved in the model.
+        suffix), which detects with the options saved in the model.
+
+    Returns
+    -------
+    object with ``predict(obs)``
+        Plug-ins come wrapped in a :class:`PluginDetector` (which re-imports them in worker
+        processes).
 
     Raises
     ------
+    ValueError
+        A plug-in that cannot be imported, lacks the attribute, or has no ``predict``.
     FileNotFoundError
-        If it is neither a built-in name nor an existing model.
+        If it is none of the above.
     """
     key = str(name_or_path)
     if key in DETECTORS:
         return DETECTORS[key]()
+    if _SPEC.match(key):
+        return _load_spec(key)
+    det = _load_entry_point(key)
+    if det is not None:
+        return det
     from dlsr.detection import DLSRDetector
 
     npz, js = DLSRDetector._paths(key)
     if npz.exists() or js.exists():
         return DLSRDetector.load(key).detector()  # names the missing or broken file
+    installed = ", ".join(sorted(plugin_names())) or "none installed"
     raise FileNotFoundError(
-        f"unknown detector {key!r}: not one of {', '.join(DETECTORS)} and no saved model "
-        f"({npz} + {js})"
+        f"unknown detector {key!r}: not one of {', '.join(DETECTORS)}, not a plug-in "
+        f"(package.module:NAME, or an entry point of {ENTRY_POINT_GROUP}: {installed}) and no "
+        f"saved model ({npz} + {js})"
     )
+
+
+def check_detector(name_or_path) -> None:
+    """Raise the error :func:`load_detector` would give for ``name_or_path``, without loading it.
+
+    A plug-in's module is imported and NAME looked up (a class must have ``predict``), but no
+    factory or class is called and no model is read, so checking costs no checkpoint load; use
+    it to reject a bad name before a long run starts.
+    """
+    key = str(name_or_path)
+    if key in DETECTORS:
+        return
+    if _SPEC.match(key):
+        obj, _ = _resolve_spec(key)
+        if isinstance(obj, type) and not callable(getattr(obj, "predict", None)):
+            raise ValueError(f"detector {key!r}: class {obj.__name__} has no predict(obs) "
+                             "method")
+        if not callable(obj) and not callable(getattr(obj, "predict", None)):
+            raise ValueError(f"detector {key!r}: {type(obj).__name__} object is neither a "
+                             "class, a factory nor a detector with predict(obs)")
+        return
+    if key in plugin_names():
+        return
+    from dlsr.detection import DLSRDetector
+
+    npz, js = DLSRDetector._paths(key)
+    if npz.exists() or js.exists():
+        return
+    load_detector(key)  # raises the full message

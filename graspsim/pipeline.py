@@ -74,7 +74,9 @@ class RunConfig:
     trial_candidates : int
         Rectangles labelled per trial scene (for the oracle and the rectangle-metric verdict).
     baselines : list of str
-        Detectors run beside DLSR in the trials.
+        Detectors run beside DLSR in the trials: built-in names, plug-ins
+        (``"package.module:NAME"``, entry-point names of ``graspsim.detectors``) or saved
+        models (see :func:`graspsim.detectors.load_detector`).
     backend, address, jobs :
         Executor for the parallel stages (see :class:`graspsim.executor.Executor`).
     """
@@ -118,9 +120,29 @@ class RunConfig:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         check_training_options(self.fit_grid, self.hard_negatives, self.hard_rounds)
+        self._check_baselines()
         if self.scenes < self.folds:
             raise ValueError(f"{self.folds} folds need at least {self.folds} scenes")
         return self
+
+    def _check_baselines(self) -> None:
+        """Every baseline loads (built-in, plug-in or model), so a bad name fails before the
+        run rather than at its trial stage."""
+        from .detectors import check_detector
+
+        if isinstance(self.baselines, str) or not all(isinstance(b, str)
+                                                      for b in self.baselines):
+            raise ValueError(f"baselines must be a list of detector names, "
+                             f"got {self.baselines!r}")
+        seen = set()
+        for name in self.baselines:
+            if name == "dlsr" or name in seen:
+                raise ValueError(f"baselines: {name!r} is listed twice (DLSR always runs)")
+            seen.add(name)
+            try:
+                check_detector(name)
+            except (ValueError, FileNotFoundError) as exc:
+                raise ValueError(f"baselines: {exc}") from None
 
 
 # The 2-minute version (``--quick``).
@@ -319,22 +341,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
                                 "seconds": time.perf_counter() - t0})
 
     # 5. Simulated grasp trials on the held-out test objects.
-    from .trials import TrialConfig, run_trials
-
-    trial_cfg = TrialConfig(n_candidates=config.trial_candidates)
-    detectors = ["dlsr", *config.baselines]
-    for name in detectors:
-        key = f"trials/{name}"
-        if stages.done(key):
-            continue
-        t0 = time.perf_counter()
-        det = _trial_detector(name, model_path, config)
-        s = run_trials(det, objects="test", n=config.trials, seed=seeds["trials"],
-                       out=root / "trials" / name, config=trial_cfg, executor=ex,
-                       progress=progress, detector_name=name)
-        s.pop("records", None)
-        s["seconds"] = time.perf_counter() - t0
-        stages.finish(key, s)
+    trial_stage(root, config, stages, model_path, seeds["trials"], ex, progress)
 
     # 6. The report.
     from .report import write_report
@@ -348,6 +355,32 @@ def _cpus() -> int:
     import os
 
     return os.cpu_count() or 1
+
+
+def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: int, executor,
+                progress: bool = True) -> None:
+    """Stage 5: simulated grasp trials of DLSR and ``config.baselines`` on the test objects.
+
+    Each detector's trials go to ``root / "trials" / name`` (resumed trial by trial) and its
+    summary into ``stages`` as ``"trials/<name>"`` once finished. A baseline may be any name
+    :func:`graspsim.detectors.load_detector` takes, plug-ins (``package.module:NAME``,
+    entry-point names) included.
+    """
+    from .trials import TrialConfig, run_trials
+
+    trial_cfg = TrialConfig(n_candidates=config.trial_candidates)
+    for name in ["dlsr", *config.baselines]:
+        key = f"trials/{name}"
+        if stages.done(key):
+            continue
+        t0 = time.perf_counter()
+        det = _trial_detector(name, model_path, config)
+        s = run_trials(det, objects="test", n=config.trials, seed=seed,
+                       out=root / "trials" / name, config=trial_cfg, executor=executor,
+                       progress=progress, detector_name=name)
+        s.pop("records", None)
+        s["seconds"] = time.perf_counter() - t0
+        stages.finish(key, s)
 
 
 def _trial_detector(name: str, model_path: Path, config: RunConfig):

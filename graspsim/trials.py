@@ -7,16 +7,26 @@ every scene is built from scratch in the worker's own :class:`~graspsim.sim.Simu
 trial's result depends only on ``(s, i)``: the same for any ``n_jobs``, for any ``n``, and on
 resume.
 
+The detector is anything :func:`graspsim.detectors.load_detector` takes (built-in names,
+``package.module:NAME`` plug-ins, entry-point names, saved models) or an object with
+``predict(obs)``; :func:`observation` builds ``obs`` and :func:`propose` calls, times and checks
+it (see :class:`graspsim.detectors.GraspDetector` for the protocol). A ``predict`` that raises
+fails its trial (``reason`` ``"detector error: TypeName: message"``) and the run goes on; a
+return value that breaks the protocol stops the run with a one-line ``ValueError``.
+Clutter-removal rounds (``graspsim trials --declutter``) are in :mod:`graspsim.declutter`.
+
 Output folder (``out``):
 
 * ``trials.jsonl``: one JSON object per trial, appended and flushed as each trial finishes.
   Rerunning with the same arguments after a kill drops a torn last line, keeps every complete
   record and runs only the missing trial indices (none repeated, none lost). A different
-  configuration in an existing folder is refused.
+  configuration in an existing folder is refused. Each record has the detector's planning time
+  (``planning_seconds``, the wall time of ``predict``) and, when it gave scores, the executed
+  rectangle's ``score``.
 * ``config.json``: the run's arguments.
 * ``summary.json`` and ``summary.md``: physical success rate with a Wilson 95 % interval,
   rectangle-metric accuracy on the same trials, the 2x2 table of metric verdict against physical
-  outcome, failure reasons, trials per second.
+  outcome, failure reasons, planning time (median and 95th percentile), trials per second.
 """
 
 from __future__ import annotations
@@ -32,8 +42,8 @@ import numpy as np
 
 from dlsr.metrics import rectangle_metric
 
-from .detectors import load_detector
-from .execution import ExecutionParams, run_grasp
+from .detectors import check_detections, load_detector
+from .execution import ExecutionParams, execute_grasp, run_grasp
 from .grasp import rectangle_to_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
 from .objects import ObjectSpec, builtin_objects
@@ -48,6 +58,9 @@ __all__ = [
     "wilson_interval",
     "resolve_objects",
     "trial_streams",
+    "observation",
+    "propose",
+    "planning_stats",
 ]
 
 log = logging.getLogger(__name__)
@@ -150,58 +163,156 @@ def _rect_list(r) -> list[float]:
     return [round(float(v), 4) for v in r.as_array()]
 
 
+def observation(frame, detector_seed: int) -> dict:
+    """What a detector's ``predict`` gets (see :class:`graspsim.detectors.GraspDetector`).
+
+    Parameters
+    ----------
+    frame : graspsim.camera.RGBDFrame
+    detector_seed : int
+
+    Returns
+    -------
+    dict
+        ``rgb`` (H, W, 3) uint8, ``depth`` (H, W) float32 metres (0 where missing),
+        ``depth_valid`` (H, W) uint8, ``K`` (3, 3) float64 pixels, ``T_world_cam`` (4, 4)
+        float64 (OpenCV camera frame to world, metres) and ``seed``; copies, so a detector
+        cannot change what the gripper then executes.
+    """
+    return {
+        "rgb": np.array(frame.rgb, dtype=np.uint8),
+        "depth": np.array(frame.depth, dtype=np.float32),
+        "depth_valid": np.asarray(frame.depth_valid).astype(np.uint8),
+        "K": np.array(frame.intrinsics.K, dtype=np.float64),
+        "T_world_cam": np.array(frame.T_world_cam, dtype=np.float64),
+        "seed": int(detector_seed),
+    }
+
+
+def _detector_name(detector) -> str:
+    return str(getattr(detector, "spec", None) or type(detector).__name__)
+
+
+def _label_scene(sim, scene, frame, bodies, rng, detector, config, params):
+    """Physics labels of the observed scene: ``(positives or None, n_labelled)``."""
+    if config.n_candidates > 0:
+        cands = sample_candidates(frame.segmentation, bodies.objects, rng,
+                                  config.n_candidates, depth=frame.depth_clean)
+        kw = {}
+        if config.label_with_clean_depth:
+            kw = {"depth": frame.depth_clean, "depth_valid": frame.depth_clean > 0}
+        labelled = label_rectangles(sim, scene, frame, cands, params, **kw)
+        return rank_positives(labelled), len(cands)
+    if getattr(detector, "requires_labels", False):
+        raise ValueError("this detector needs labelled scenes: use n_candidates > 0")
+    return None, 0
+
+
+def propose(detector, obs, name: str | None = None):
+    """Call ``detector.predict(obs)``, time it and validate what it returns.
+
+    Returns
+    -------
+    rects : list of GraspRectangle (empty when nothing was proposed or predict raised)
+    scores : ndarray of shape (n,) or None
+    error : str or None
+        ``"detector error: TypeName: message"`` when ``predict`` raised (one line).
+    seconds : float
+        Wall time of ``predict`` (the planning time).
+
+    Raises
+    ------
+    ValueError
+        When the return value breaks the protocol (:func:`graspsim.detectors.check_detections`).
+    """
+    name = _detector_name(detector) if name is None else name
+    t0 = time.perf_counter()
+    try:
+        out = detector.predict(obs)
+    except Exception as exc:
+        msg = " ".join(str(exc).split())
+        return [], None, f"detector error: {type(exc).__name__}: {msg}".rstrip(": "), \
+            time.perf_counter() - t0
+    seconds = time.perf_counter() - t0
+    rects, scores = check_detections(out, name)
+    return rects, scores, None, seconds
+
+
+def _execute(sim, scene, frame, rects, scores, error, positives, params):
+    """Execute the first of ``rects`` in ``scene`` (rebuilt from scratch).
+
+    Returns the record fields, the GraspResult (None when nothing ran) and the scene bodies the
+    grasp ran in (None when the gripper never moved: no proposal, no valid grasp pose).
+    """
+    if error is not None or not rects:
+        fields = dict(rectangle=None, pose=None, success=False,
+                      reason=error if error is not None else NO_PROPOSAL, lift_height=0.0,
+                      metric=None if positives is None else False)
+        return fields, None, None
+    rect = rects[0]
+    g = rectangle_to_grasp(rect, frame.depth, frame.depth_valid, frame.intrinsics,
+                           frame.T_world_cam)
+    if g.failure is not None:
+        res, bodies = run_grasp(sim, scene, g, params), None
+    else:
+        bodies = build_scene(sim, scene)
+        res = execute_grasp(sim, scene, bodies, g, params)
+    fields = dict(
+        rectangle=_rect_list(rect),
+        pose=None if res.T_world_tcp is None else np.round(res.T_world_tcp, 5).tolist(),
+        opening=round(float(g.opening), 5),
+        success=bool(res.success), reason=res.reason,
+        lift_height=round(float(res.lift_height), 5),
+        metric=None if positives is None else bool(rectangle_metric(rect, positives)),
+    )
+    if scores is not None:
+        fields["score"] = float(scores[0])
+    return fields, res, bodies
+
+
 def run_trial(sim, specs, detector, seed: int, index: int,
               config: TrialConfig = TrialConfig(),
-              params: ExecutionParams | None = None) -> dict:
+              params: ExecutionParams | None = None, name: str | None = None) -> dict:
     """One trial: scene, observation, (labels), detection, execution, verdict.
+
+    Parameters
+    ----------
+    name : str or None
+        The detector's name in error messages (default: its plug-in name or class name).
 
     Returns
     -------
     dict
         The JSON record (``index``, ``seed``, ``object``, ``rectangle``, ``pose``, ``success``,
         ``reason``, ``lift_height``, ``metric`` (bool or None when unlabelled), ``n_positives``,
-        ``n_labelled``, ``seconds``).
+        ``n_labelled``, ``planning_seconds`` (the detector's ``predict``), ``score`` (when the
+        detector gave scores), ``seconds``). A ``predict`` that raised gives a failed trial
+        whose ``reason`` is ``"detector error: TypeName: message"``.
+
+    Raises
+    ------
+    ValueError
+        When the detector's return value breaks the protocol (the message names the trial).
     """
     t0 = time.perf_counter()
     scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects)
-    obs = {"rgb": frame.rgb, "depth": frame.depth,
-           "depth_valid": frame.depth_valid.astype(np.uint8), "seed": st["detector_seed"]}
-    positives, n_labelled = None, 0
-    if config.n_candidates > 0:
-        cands = sample_candidates(frame.segmentation, bodies.objects, st["label"],
-                                  config.n_candidates, depth=frame.depth_clean)
-        kw = {}
-        if config.label_with_clean_depth:
-            kw = {"depth": frame.depth_clean, "depth_valid": frame.depth_clean > 0}
-        labelled = label_rectangles(sim, scene, frame, cands, params, **kw)
-        positives = rank_positives(labelled)
-        n_labelled = len(cands)
+    obs = observation(frame, st["detector_seed"])
+    positives, n_labelled = _label_scene(sim, scene, frame, bodies, st["label"], detector,
+                                         config, params)
+    if positives is not None:
         obs["positives"] = positives
-    elif getattr(detector, "requires_labels", False):
-        raise ValueError("this detector needs labelled scenes: use n_candidates > 0")
-    rects = detector.predict(obs)
+    try:
+        rects, scores, error, planning = propose(detector, obs, name)
+    except ValueError as exc:
+        raise ValueError(f"trial {index} (seed {seed}): {exc}") from None
     record = {
         "index": index, "seed": seed, "object": [o.spec.name for o in scene.objects],
         "graspable": all(o.spec.graspable for o in scene.objects),
         "redraws": scene.redraws, "n_labelled": n_labelled,
         "n_positives": None if positives is None else len(positives),
     }
-    if not rects:
-        record.update(rectangle=None, pose=None, success=False, reason=NO_PROPOSAL,
-                      lift_height=0.0, metric=None if positives is None else False)
-    else:
-        rect = rects[0]
-        g = rectangle_to_grasp(rect, frame.depth, frame.depth_valid, frame.intrinsics,
-                               frame.T_world_cam)
-        res = run_grasp(sim, scene, g, params)
-        record.update(
-            rectangle=_rect_list(rect),
-            pose=None if res.T_world_tcp is None else np.round(res.T_world_tcp, 5).tolist(),
-            opening=round(float(g.opening), 5),
-            success=bool(res.success), reason=res.reason,
-            lift_height=round(float(res.lift_height), 5),
-            metric=None if positives is None else bool(rectangle_metric(rect, positives)),
-        )
+    record.update(_execute(sim, scene, frame, rects, scores, error, positives, params)[0])
+    record["planning_seconds"] = round(planning, 6)
     record["seconds"] = round(time.perf_counter() - t0, 4)
     return record
 
@@ -234,6 +345,61 @@ def read_done(path: Path) -> dict[int, dict]:
     return done
 
 
+def _open_campaign(out, meta: dict, filename: str):
+    """Create or reopen an output folder: refuse another configuration, read finished records.
+
+    Returns ``(out, jsonl path, {index: record})``; ``(None, None, {})`` for in-memory runs.
+    """
+    if out is None:
+        return None, None, {}
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg_path = out / "config.json"
+    if cfg_path.exists():
+        old = json.loads(cfg_path.read_text())
+        if {k: old.get(k) for k in meta} != json.loads(json.dumps(meta)):
+            raise ValueError(
+                f"{out} holds trials of another configuration ({cfg_path}); use a new folder"
+            )
+    cfg_path.write_text(json.dumps(meta, indent=2) + "\n")
+    jsonl = out / filename
+    return out, jsonl, read_done(jsonl)
+
+
+def _run_missing(fn, tasks, done: dict, jsonl, executor, desc: str) -> int:
+    """Run ``fn(*task)`` for every task, append each record to ``jsonl`` (flushed) as it comes
+    and put it in ``done`` by its ``index``; returns the number of new records."""
+    new = 0
+    if not tasks:
+        return new
+    fh = open(jsonl, "a") if jsonl is not None else None  # noqa: SIM115
+    try:
+        for rec in executor.imap(fn, tasks, desc=desc, star=True):
+            done[rec["index"]] = rec
+            new += 1
+            if fh is not None:
+                fh.write(json.dumps(rec) + "\n")
+                fh.flush()
+    finally:
+        if fh is not None:
+            fh.close()
+    return new
+
+
+def _resolve(detector, detector_name):
+    name = detector_name or (str(detector) if isinstance(detector, str | Path)
+                             else _detector_name(detector))
+    det = load_detector(detector) if isinstance(detector, str | Path) else detector
+    return det, name
+
+
+def _executor(executor, n_jobs, progress):
+    from .executor import Executor
+
+    return executor or Executor(backend="loky" if n_jobs != 1 else "sequential",
+                                n_jobs=n_jobs, progress=progress)
+
+
 def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, out=None,
                n_jobs: int = 1, config: TrialConfig = TrialConfig(),
                params: ExecutionParams | None = None, progress: bool = False,
@@ -243,8 +409,9 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     Parameters
     ----------
     detector : str or object
-        A built-in name (``random``, ``mask-pca``, ``oracle``), a model path, or an object with
-        ``predict(obs)``.
+        A built-in name (``random``, ``mask-pca``, ``oracle``), a plug-in
+        (``package.module:NAME`` or an installed entry-point name), a model path, or an object
+        with ``predict(obs)`` (:class:`graspsim.detectors.GraspDetector`).
     objects : {"train", "test", "all"} or list of ObjectSpec
     n : int
         Trials (indices ``0 .. n-1``).
@@ -259,70 +426,46 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     executor : graspsim.executor.Executor or None
         Where trials run (local cores or a Ray cluster; ``n_jobs`` is then ignored).
     detector_name : str or None
-        Name recorded for a detector object (default: its class name).
+        Name recorded for a detector object (default: its plug-in name or class name).
 
     Returns
     -------
     dict
         The summary (see :func:`summarize`), with ``records`` sorted by index.
     """
-    from .executor import Executor
-
-    det_name = detector_name or (detector if isinstance(detector, str | Path)
-                                 else type(detector).__name__)
-    det = load_detector(detector) if isinstance(detector, str | Path) else detector
+    det, det_name = _resolve(detector, detector_name)
     specs = resolve_objects(objects)
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
-    meta = {"detector": str(det_name), "objects": objects if isinstance(objects, str)
+    meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
             else [s.name for s in specs], "seed": seed, "config": asdict(config)}
-    done: dict[int, dict] = {}
-    jsonl = None
-    if out is not None:
-        out = Path(out)
-        out.mkdir(parents=True, exist_ok=True)
-        cfg_path = out / "config.json"
-        if cfg_path.exists():
-            old = json.loads(cfg_path.read_text())
-            if {k: old.get(k) for k in meta} != json.loads(json.dumps(meta)):
-                raise ValueError(
-                    f"{out} holds trials of another configuration ({cfg_path}); "
-                    f"use a new folder"
-                )
-        cfg_path.write_text(json.dumps(meta, indent=2) + "\n")
-        jsonl = out / "trials.jsonl"
-        done = read_done(jsonl)
+    out, jsonl, done = _open_campaign(out, meta, "trials.jsonl")
     todo = [i for i in range(n) if i not in done]
     if done:
         log.info("resuming: %d of %d trials already done", n - len(todo), n)
     t0 = time.perf_counter()
-    new = 0
-    if todo:
-        ex = executor or Executor(backend="loky" if n_jobs != 1 else "sequential",
-                                  n_jobs=n_jobs, progress=progress)
-        tasks = [(specs, det, seed, i, config, params) for i in todo]
-        fh = open(jsonl, "a") if jsonl is not None else None  # noqa: SIM115
-        try:
-            for rec in ex.imap(_trial_task, tasks, desc="trials", star=True):
-                done[rec["index"]] = rec
-                new += 1
-                if fh is not None:
-                    fh.write(json.dumps(rec) + "\n")
-                    fh.flush()
-        finally:
-            if fh is not None:
-                fh.close()
+    tasks = [(specs, det, seed, i, config, params) for i in todo]
+    new = _run_missing(_trial_task, tasks, done, jsonl,
+                       _executor(executor, n_jobs, progress) if tasks else None, "trials")
     wall = time.perf_counter() - t0
     records = [done[i] for i in sorted(done) if i < n]
     summary = summarize(records)
     summary.update(meta)
     summary["trials_per_second"] = (new / wall) if new and wall > 0 else None
-    summary["n_jobs"] = n_jobs
+    summary["n_jobs"] = n_jobs if executor is None else executor.n_jobs
     if out is not None:
         (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
         (out / "summary.md").write_text(summary_markdown(summary))
     summary["records"] = records
     return summary
+
+
+def planning_stats(seconds) -> dict:
+    """Median and 95th percentile (linear interpolation) of planning times, seconds."""
+    x = np.asarray([s for s in seconds if s is not None], dtype=float)
+    if x.size == 0:
+        return {"n": 0, "median": None, "p95": None}
+    return {"n": int(x.size), "median": float(np.median(x)), "p95": float(np.percentile(x, 95))}
 
 
 def summarize(records: list[dict]) -> dict:
@@ -368,6 +511,7 @@ def summarize(records: list[dict]) -> dict:
         "failure_reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1])),
         "per_object": {k_: {"successes": v[0], "n": v[1]} for k_, v in sorted(per_object.items())},
         "seconds_per_trial": float(np.mean(seconds)) if seconds else None,
+        "planning_seconds": planning_stats(r.get("planning_seconds") for r in records),
     }
 
 
@@ -393,6 +537,7 @@ def summary_markdown(s: dict) -> str:
         f"- metric/physics agreement: {pct(s['agreement'])}",
         f"- trials per second (this run): {tps} with {s.get('n_jobs')} job(s); "
         f"mean {s['seconds_per_trial'] or 0:.2f} s per trial per worker",
+        _planning_line(s.get("planning_seconds")),
         "",
         "| rectangle metric \\ physics | success | failure |",
         "|---|---|---|",
@@ -406,3 +551,10 @@ def summary_markdown(s: dict) -> str:
     lines += ["", "| object | successes | trials |", "|---|---|---|"]
     lines += [f"| {k} | {v['successes']} | {v['n']} |" for k, v in s["per_object"].items()]
     return "\n".join(lines) + "\n"
+
+
+def _planning_line(p) -> str:
+    if not p or not p.get("n"):
+        return "- detector planning time: not recorded"
+    return (f"- detector planning time (predict): median {1000 * p['median']:.3g} ms, "
+            f"95th percentile {1000 * p['p95']:.3g} ms (n = {p['n']})")

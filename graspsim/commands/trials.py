@@ -4,33 +4,69 @@ from __future__ import annotations
 
 import argparse
 
+from . import add_executor_args, executor_from_args
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "trials", help="simulated grasp trials of a detector (physics + rectangle metric)"
+        "trials", help="simulated grasp trials of a detector (physics + rectangle metric)",
+        description="Simulated grasp trials of a detector. --declutter runs clutter-removal "
+                    "rounds instead (VGN/GIGA protocol): grasp until the table is clear, "
+                    "nothing is proposed, or 2 consecutive failures.",
     )
     p.add_argument("--detector", required=True,
-                   help="random, mask-pca, oracle, or the path of a saved model")
+                   help="random, mask-pca, oracle, a plug-in package.module:NAME (a class or "
+                        "factory whose object has predict(obs); the current folder is "
+                        "searched too), a name registered in the entry-point group "
+                        "graspsim.detectors, or the path of a saved model")
     p.add_argument("--objects", default="test", choices=["train", "test", "all"])
-    p.add_argument("--n", type=int, default=200, help="number of trials")
+    p.add_argument("--n", type=int, default=200,
+                   help="number of trials (with --declutter: of rounds)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="output folder (resumes if it has trials)")
-    p.add_argument("--jobs", type=int, default=1, help="worker processes (results do not change)")
+    add_executor_args(p)
     p.add_argument("--candidates", type=int, default=32,
-                   help="rectangles executed to label each scene (0: no labels, no metric)")
-    p.add_argument("--objects-per-scene", type=int, default=1, help="1: Cornell-like; >1 clutter")
+                   help="rectangles executed to label each scene (0: no labels, no metric); "
+                        "with --declutter every observation of a round is labelled")
+    p.add_argument("--objects-per-scene", type=int, default=None,
+                   help="1: Cornell-like (default); >1 clutter (default 5 with --declutter)")
+    p.add_argument("--declutter", action="store_true",
+                   help="clutter-removal rounds: a lifted object leaves the scene and the "
+                        "detector grasps again; reports grasp success and declutter rates "
+                        "(rounds.jsonl, resumed per round)")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     from graspsim.trials import TrialConfig, run_trials
 
-    s = run_trials(
-        detector=args.detector, objects=args.objects, n=args.n, seed=args.seed, out=args.out,
-        n_jobs=args.jobs, progress=True,
-        config=TrialConfig(n_candidates=args.candidates, n_objects=args.objects_per_scene),
-    )
+    k = args.objects_per_scene
+    if k is None:
+        k = 5 if args.declutter else 1
+    if k < 1:
+        raise ValueError(f"--objects-per-scene must be >= 1, got {k}")
+    if args.n < 0:
+        raise ValueError(f"--n must be >= 0, got {args.n}")
+    config = TrialConfig(n_candidates=args.candidates, n_objects=k)
+    executor = executor_from_args(args)
+    kwargs = dict(detector=args.detector, objects=args.objects, n=args.n, seed=args.seed,
+                  out=args.out, n_jobs=args.jobs, progress=True, config=config,
+                  executor=executor)
+    if args.declutter:
+        from graspsim.declutter import run_rounds
+
+        s = run_rounds(**kwargs)
+        print(f"{args.detector}: grasp success {s['successes']}/{s['attempts']} = "
+              f"{_pct(s['success_rate'])}, declutter rate {s['removed']}/"
+              f"{s['objects_placed']} = {_pct(s['declutter_rate'])} over {s['rounds']} rounds "
+              f"of {k} objects; summary in {args.out}/summary.md")
+        return 0
+    s = run_trials(**kwargs)
     lo, hi = s["success_ci95"]
-    print(f"{args.detector}: success {s['successes']}/{s['n']} = {100 * s['success_rate']:.1f} % "
-          f"(95 % CI {100 * lo:.1f}-{100 * hi:.1f} %); summary in {args.out}/summary.md")
+    print(f"{args.detector}: success {s['successes']}/{s['n']} = {_pct(s['success_rate'])} "
+          f"(95 % CI {_pct(lo)}-{_pct(hi)}); summary in {args.out}/summary.md")
     return 0
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None or x != x else f"{100 * x:.1f} %"

@@ -27,7 +27,8 @@ def easy_objects():
 
 
 def strip(records):
-    return [{k: v for k, v in r.items() if k != "seconds"} for r in records]
+    return [{k: v for k, v in r.items() if k not in ("seconds", "planning_seconds")}
+            for r in records]
 
 
 def test_wilson_interval():
@@ -167,3 +168,21 @@ def test_trials_cli(tmp_path, capsys):
                  "--candidates", "0", "--out", str(out)]) == 0
     assert len((out / "trials.jsonl").read_text().splitlines()) == 2
     assert json.loads((out / "summary.json").read_text())["n"] == 2
+    # The executor flags of every long command.
+    assert main(["trials", "--detector", "mask-pca", "--n", "1", "--address", "127.0.0.1:1",
+                 "--out", str(tmp_path / "y")]) == 2
+    assert "--address needs --backend ray" in capsys.readouterr().err
+
+
+@pytest.mark.slow  # about 20 s on 2 cores, most of it starting Ray
+def test_ray_backend_gives_the_records_of_loky(easy_objects):
+    pytest.importorskip("ray", reason="Ray is an optional extra (pip install '.[ray]')")
+    from graspsim.executor import Executor
+
+    cfg = TrialConfig(n_candidates=2)
+    loky = run_trials("random", easy_objects, n=3, seed=6, config=cfg,
+                      executor=Executor("loky", n_jobs=2, progress=False))
+    ray_ = run_trials("random", easy_objects, n=3, seed=6, config=cfg,
+                      executor=Executor("ray", n_jobs=2, progress=False))
+    assert strip(ray_["records"]) == strip(loky["records"])
+    assert [r["index"] for r in ray_["records"]] == [0, 1, 2]
