@@ -17,10 +17,12 @@ with ``options={"label": True}``: the action against the scene's physics-labelle
 (also given as ``info["positives"]`` by ``reset``).
 
 Default episode: one object, one grasp (``terminated`` after the step). ``declutter=True``:
-``n_objects`` objects; a grasped object is removed, the others settle and a new observation is
-rendered; the episode terminates when the table is empty and is truncated by the
-``max_episode_steps`` of the registration. Every random value comes from ``self.np_random``
-(seeded by ``reset(seed=...)``), so the same seed gives the same observations and outcomes.
+``n_objects`` objects; a grasped object is removed (and so are objects pushed off the table,
+listed in ``info["fell_off"]``), the others settle and a new observation is rendered (the scene
+update of :func:`graspsim.declutter.scene_after_grasp`); the episode terminates when the table
+is empty and is truncated by the ``max_episode_steps`` of the registration. Every random value
+comes from ``self.np_random`` (seeded by ``reset(seed=...)``), so the same seed gives the same
+observations and outcomes.
 """
 
 from __future__ import annotations
@@ -32,10 +34,10 @@ from gymnasium import spaces
 from dlsr.metrics import rectangle_metric
 from dlsr.rectangles import GraspRectangle
 
-from .execution import run_grasp
+from .execution import execute_grasp, run_grasp
 from .grasp import rectangle_to_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
-from .scene import PlacedObject, Scene, build_scene, capture, link_pose, make_scene, settle
+from .scene import build_scene, capture, make_scene
 from .sim import Simulation
 
 __all__ = ["GraspEnv"]
@@ -136,7 +138,11 @@ class GraspEnv(gym.Env):
         rect = GraspRectangle(*a)
         f = self._frame
         grasp = rectangle_to_grasp(rect, f.depth, f.depth_valid, f.intrinsics, f.T_world_cam)
-        res = run_grasp(self.sim, self._scene, grasp)
+        if grasp.failure is None:
+            bodies = build_scene(self.sim, self._scene)
+            res = execute_grasp(self.sim, self._scene, bodies, grasp)
+        else:  # nothing moves
+            bodies, res = None, run_grasp(self.sim, self._scene, grasp)
         info = {
             "success": bool(res.success),
             "failure_reason": res.reason,
@@ -156,43 +162,18 @@ class GraspEnv(gym.Env):
                 "depth_valid": np.asarray(f.depth_valid, dtype=np.uint8).copy(),
             }
             return obs, reward, terminated, False, info
-        # Declutter: the grasped object leaves; the rest settle where the grasp left them.
-        c = self.sim.client
-        kept = []
-        executed = res.T_world_tcp is not None
-        for i, (o, b) in enumerate(zip(self._scene.objects, self._bodies_after(executed),
-                                       strict=True)):
-            if res.success and i == res.object_index:
-                continue
-            pos, orn = link_pose(c, b) if b is not None else (o.position, o.orientation)
-            if max(abs(pos[0]), abs(pos[1])) > 0.45 or pos[2] < self._scene.table_z - 0.01:
-                continue  # pushed off the table
-            kept.append(PlacedObject(o.spec, pos, orn))
-        self._scene = self._settled(Scene(kept, self._scene.table_z, self._scene.table_rgba))
+        # Declutter: the grasped object leaves, objects pushed off the table too; the rest
+        # settle where the grasp left them (the same update as graspsim.declutter's rounds).
+        from .declutter import scene_after_grasp
+
+        names = [o.spec.name for o in self._scene.objects]
+        self._scene, fell = scene_after_grasp(self.sim, self._scene, bodies, res)
+        info["fell_off"] = [names[i] for i in fell]
         terminated = len(self._scene.objects) == 0
         obs = self._observe()
         if self._label_scenes and not terminated:
             self._label()
         return obs, reward, terminated, False, info
-
-    def _bodies_after(self, executed):
-        """Body ids of the scene objects after an execution (None where nothing ran)."""
-        if not executed:
-            return [None] * len(self._scene.objects)
-        # run_grasp rebuilt the scene: table first, then the objects in order.
-        c = self.sim.client
-        ids = [c.getBodyUniqueId(i) for i in range(c.getNumBodies())]
-        return ids[1:1 + len(self._scene.objects)]
-
-    def _settled(self, scene):
-        """Let ``scene`` settle from its current poses and read the poses back."""
-        if not scene.objects:
-            return scene
-        bodies = build_scene(self.sim, scene)
-        settle(self.sim, bodies.objects, max_time=2.0)
-        objs = [PlacedObject(o.spec, *link_pose(self.sim.client, b))
-                for o, b in zip(scene.objects, bodies.objects, strict=True)]
-        return Scene(objs, scene.table_z, scene.table_rgba, list(scene.redraws))
 
     def render(self):
         if self.render_mode == "rgb_array":

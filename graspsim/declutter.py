@@ -1,0 +1,378 @@
+"""Clutter-removal rounds as VGN and GIGA run them, and the scene update they share with
+``graspsim/Grasp-v0``'s declutter mode.
+
+A round places ``K`` objects (``TrialConfig.n_objects``) and grasps repeatedly: observe, ask the
+detector, execute its first rectangle. A lifted object is removed from the scene; objects the
+grasp pushes off the table are removed too (they leave the table but do not count as
+successes); the rest settle where the grasp left them and are observed again. A round ends when
+the table is clear, when the detector proposes nothing (or its ``predict`` raises), or after
+2 consecutive failed grasps -- the end conditions and the two figures of the clutter-removal
+benchmark of VGN (Breyer et al., CoRL 2020, ``MAX_CONSECUTIVE_FAILURES = 2``) that GIGA
+(Jiang et al., RSS 2021) reuses:
+
+* grasp success rate = successful grasps / executed grasps, over all rounds;
+* declutter rate ("percent cleared") = objects removed by successful grasps / objects placed,
+  over all rounds (VGN sums over the rounds in which at least one grasp was executed; here every
+  round counts, so a round whose first call proposes nothing lowers the rate).
+
+Round ``i`` of a run with seed ``s`` starts from the same scene, observation and labels as
+trial ``i`` of :func:`graspsim.trials.run_trials` with the same ``n_objects`` (its first attempt
+is that trial); attempt ``a >= 1`` draws its camera, labels and detector seed from
+``SeedSequence(s, spawn_key=(i, 3 + a))``, so a round depends only on ``(s, i)``.
+
+Output folder: ``rounds.jsonl`` (one record per finished round, with its attempts; appended and
+flushed, resumed per round like ``trials.jsonl``), ``config.json`` (``"mode": "declutter"``),
+``summary.json`` and ``summary.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import asdict
+
+import numpy as np
+
+from .execution import ExecutionParams
+from .scene import TABLE_HALF_SIZE, PlacedObject, Scene, build_scene, capture, link_pose, settle
+from .trials import (
+    NO_PROPOSAL,
+    TrialConfig,
+    _detector_name,
+    _execute,
+    _executor,
+    _label_scene,
+    _open_campaign,
+    _planning_line,
+    _resolve,
+    _run_missing,
+    _worker_sim,
+    observation,
+    observe_scene,
+    planning_stats,
+    propose,
+    resolve_objects,
+    wilson_interval,
+)
+
+__all__ = [
+    "MAX_CONSECUTIVE_FAILURES",
+    "CLEARED",
+    "FAILURES",
+    "scene_after_grasp",
+    "run_round",
+    "run_rounds",
+    "summarize_rounds",
+    "bootstrap_ratio_interval",
+]
+
+log = logging.getLogger(__name__)
+
+MAX_CONSECUTIVE_FAILURES = 2
+CLEARED = "table cleared"
+FAILURES = f"{MAX_CONSECUTIVE_FAILURES} consecutive failures"
+#: Five objects per round (VGN's clutter-removal default), 32 labelling candidates.
+DEFAULT_CONFIG = TrialConfig(n_objects=5)
+#: An object whose base link ends farther than this from the table centre (x or y, metres), or
+#: below the table top, has left the table.
+OFF_TABLE = TABLE_HALF_SIZE - 0.05
+
+
+def _off_table(position, table_z: float) -> bool:
+    return max(abs(position[0]), abs(position[1])) > OFF_TABLE or position[2] < table_z - 0.01
+
+
+def scene_after_grasp(sim, scene: Scene, bodies, result, settle_time: float = 2.0):
+    """The scene an executed grasp leaves: the lifted object gone, fallen objects gone, the
+    others settled where the grasp left them.
+
+    Parameters
+    ----------
+    sim : graspsim.sim.Simulation
+        Still holding the bodies of the grasp, as :func:`graspsim.execution.execute_grasp`
+        left them.
+    scene : Scene
+        The scene the grasp was executed in.
+    bodies : SceneBodies or None
+        Its bodies; None when the gripper never moved (the scene is returned unchanged).
+    result : GraspResult
+    settle_time : float
+        Seconds of simulation for the remaining objects to come to rest.
+
+    Returns
+    -------
+    scene : Scene
+        The remaining objects at rest (the simulator then holds them, built anew).
+    fell : list of int
+        Indices into ``scene.objects`` of the objects that left the table (never the grasped
+        one on a success).
+    """
+    if bodies is None:
+        return scene, []
+    c = sim.client
+    kept, fell = [], []
+    for i, (o, b) in enumerate(zip(scene.objects, bodies.objects, strict=True)):
+        if result is not None and result.success and i == result.object_index:
+            continue
+        pos, orn = link_pose(c, b)
+        if _off_table(pos, scene.table_z):
+            fell.append(i)
+            continue
+        kept.append((i, PlacedObject(o.spec, pos, orn)))
+    left = []
+    if kept:
+        rest = Scene([o for _, o in kept], scene.table_z, scene.table_rgba)
+        new_bodies = build_scene(sim, rest)
+        settle(sim, new_bodies.objects, max_time=settle_time)
+        for (i, o), b in zip(kept, new_bodies.objects, strict=True):
+            pos, orn = link_pose(c, b)
+            if _off_table(pos, scene.table_z):
+                fell.append(i)
+            else:
+                left.append(PlacedObject(o.spec, pos, orn))
+    return Scene(left, scene.table_z, scene.table_rgba, list(scene.redraws)), sorted(fell)
+
+
+def _attempt_streams(seed: int, index: int, attempt: int) -> dict:
+    ss = np.random.SeedSequence(seed, spawn_key=(index, 3 + attempt))
+    camera_ss, label_ss, det_ss = ss.spawn(3)
+    return {"camera": np.random.default_rng(camera_ss), "label": np.random.default_rng(label_ss),
+            "detector_seed": int(det_ss.generate_state(1)[0])}
+
+
+def run_round(sim, specs, detector, seed: int, index: int,
+              config: TrialConfig = DEFAULT_CONFIG,
+              params: ExecutionParams | None = None, name: str | None = None) -> dict:
+    """One clutter-removal round (see the module docstring).
+
+    Returns
+    -------
+    dict
+        The JSON record: ``index``, ``seed``, ``objects`` (names placed), ``n_objects``,
+        ``redraws``, ``attempts`` (one dict per executed grasp: ``attempt``, ``objects_left``
+        before it, ``rectangle``, ``pose``, ``opening``, ``success``, ``reason``,
+        ``lift_height``, ``grasped`` (the lifted object's name or None), ``fell_off`` (names),
+        ``metric``, ``n_positives``, ``planning_seconds``, ``score`` when given), ``end`` (why
+        the round ended: ``"table cleared"``, ``"no grasp proposed"``,
+        ``"2 consecutive failures"`` or ``"detector error: ..."``), ``end_planning_seconds``
+        (the last call when it ended the round, else None), ``successes``, ``removed`` (objects
+        removed by successful grasps), ``fell_off`` (objects that left the table), ``left``,
+        ``seconds``.
+
+    Raises
+    ------
+    ValueError
+        When the detector's return value breaks the protocol (the message names the round).
+    """
+    t0 = time.perf_counter()
+    name = _detector_name(detector) if name is None else name
+    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects)
+    placed = [o.spec.name for o in scene.objects]
+    record = {"index": index, "seed": seed, "objects": placed, "n_objects": len(placed),
+              "redraws": list(scene.redraws)}
+    attempts: list[dict] = []
+    failures, end, end_planning = 0, None, None
+    while True:
+        if not scene.objects:
+            end = CLEARED
+            break
+        if failures >= MAX_CONSECUTIVE_FAILURES:
+            end = FAILURES
+            break
+        a = len(attempts)
+        if a > 0:
+            st = _attempt_streams(seed, index, a)
+            bodies = build_scene(sim, scene)
+            frame = capture(sim, scene, bodies, st["camera"])
+        obs = observation(frame, st["detector_seed"])
+        positives, n_labelled = _label_scene(sim, scene, frame, bodies, st["label"], detector,
+                                             config, params)
+        if positives is not None:
+            obs["positives"] = positives
+        try:
+            rects, scores, error, planning = propose(detector, obs, name)
+        except ValueError as exc:
+            raise ValueError(f"round {index} (seed {seed}), attempt {a}: {exc}") from None
+        if error is not None or not rects:
+            end, end_planning = (error or NO_PROPOSAL), round(planning, 6)
+            break
+        fields, res, ran = _execute(sim, scene, frame, rects, scores, None, positives, params)
+        grasped = (scene.objects[res.object_index].spec.name
+                   if res is not None and res.success else None)
+        names = [o.spec.name for o in scene.objects]
+        left_before = len(scene.objects)
+        scene, fell = scene_after_grasp(sim, scene, ran, res)
+        attempts.append({"attempt": a, "objects_left": left_before, **fields,
+                         "grasped": grasped, "fell_off": [names[i] for i in fell],
+                         "n_labelled": n_labelled,
+                         "n_positives": None if positives is None else len(positives),
+                         "planning_seconds": round(planning, 6)})
+        failures = 0 if fields["success"] else failures + 1
+    record.update(
+        attempts=attempts, end=end, end_planning_seconds=end_planning,
+        successes=sum(bool(t["success"]) for t in attempts),
+        removed=sum(t["grasped"] is not None for t in attempts),
+        fell_off=sum(len(t["fell_off"]) for t in attempts), left=len(scene.objects),
+        seconds=round(time.perf_counter() - t0, 4),
+    )
+    return record
+
+
+def _round_task(specs, detector, seed, index, config, params):
+    return run_round(_worker_sim(), specs, detector, seed, index, config, params)
+
+
+def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, out=None,
+               n_jobs: int = 1, config: TrialConfig = DEFAULT_CONFIG,
+               params: ExecutionParams | None = None, progress: bool = False, executor=None,
+               detector_name: str | None = None) -> dict:
+    """Run (or finish) ``n`` clutter-removal rounds of ``config.n_objects`` objects each.
+
+    Parameters are those of :func:`graspsim.trials.run_trials` (``n`` counts rounds); rounds
+    run in parallel, the attempts of a round in sequence.
+
+    Returns
+    -------
+    dict
+        The summary (see :func:`summarize_rounds`), with ``records`` sorted by index.
+    """
+    det, det_name = _resolve(detector, detector_name)
+    specs = resolve_objects(objects)
+    if n < 0:
+        raise ValueError(f"n must be >= 0, got {n}")
+    if config.n_objects < 1:
+        raise ValueError(f"objects per scene must be >= 1, got {config.n_objects}")
+    meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
+            else [s.name for s in specs], "seed": seed, "config": asdict(config),
+            "mode": "declutter"}
+    out, jsonl, done = _open_campaign(out, meta, "rounds.jsonl")
+    todo = [i for i in range(n) if i not in done]
+    if done:
+        log.info("resuming: %d of %d rounds already done", n - len(todo), n)
+    t0 = time.perf_counter()
+    tasks = [(specs, det, seed, i, config, params) for i in todo]
+    new = _run_missing(_round_task, tasks, done, jsonl,
+                       _executor(executor, n_jobs, progress) if tasks else None, "rounds")
+    wall = time.perf_counter() - t0
+    records = [done[i] for i in sorted(done) if i < n]
+    summary = summarize_rounds(records, random_state=seed)
+    summary.update(meta)
+    summary["rounds_per_second"] = (new / wall) if new and wall > 0 else None
+    summary["n_jobs"] = n_jobs if executor is None else executor.n_jobs
+    if out is not None:
+        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (out / "summary.md").write_text(rounds_markdown(summary))
+    summary["records"] = records
+    return summary
+
+
+def bootstrap_ratio_interval(num, den, n_boot: int = 2000, level: float = 0.95,
+                             random_state=None) -> list[float | None]:
+    """Percentile bootstrap interval of ``sum(num) / sum(den)``, resampling the units.
+
+    Parameters
+    ----------
+    num, den : array-like of shape (n,)
+        Per unit (here: per round) numerator and denominator counts.
+    n_boot : int
+    level : float
+    random_state : int, SeedSequence, Generator or None
+
+    Returns
+    -------
+    [low, high], or [None, None] when there is no unit or the denominator is 0.
+    """
+    num, den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
+    if num.size == 0 or den.sum() <= 0:
+        return [None, None]
+    rng = np.random.default_rng(random_state)
+    idx = rng.integers(0, num.size, size=(n_boot, num.size))
+    d = den[idx].sum(axis=1)
+    ratios = num[idx].sum(axis=1)[d > 0] / d[d > 0]
+    a = (1 - level) / 2
+    return [float(np.quantile(ratios, a)), float(np.quantile(ratios, 1 - a))]
+
+
+def summarize_rounds(records: list[dict], random_state=None) -> dict:
+    """Grasp success rate (Wilson 95 % and bootstrap over rounds), declutter rate (bootstrap
+    over rounds), end reasons, failure reasons, planning time."""
+    attempts = [t for r in records for t in r["attempts"]]
+    n_att = len(attempts)
+    k = sum(bool(t["success"]) for t in attempts)
+    placed = sum(r["n_objects"] for r in records)
+    removed = sum(r["removed"] for r in records)
+    ss = np.random.SeedSequence(random_state)
+    rng_s, rng_d = (np.random.default_rng(c) for c in ss.spawn(2))
+    ends: dict[str, int] = {}
+    for r in records:
+        ends[r["end"]] = ends.get(r["end"], 0) + 1
+    reasons: dict[str, int] = {}
+    for t in attempts:
+        if not t["success"]:
+            reasons[t["reason"]] = reasons.get(t["reason"], 0) + 1
+    verdicts = [t for t in attempts if t.get("metric") is not None]
+    return {
+        "rounds": len(records),
+        "objects_placed": placed,
+        "attempts": n_att,
+        "successes": k,
+        "success_rate": k / n_att if n_att else None,
+        "success_ci95": list(wilson_interval(k, n_att)) if n_att else [None, None],
+        "success_ci95_bootstrap": bootstrap_ratio_interval(
+            [r["successes"] for r in records], [len(r["attempts"]) for r in records],
+            random_state=rng_s),
+        "removed": removed,
+        "fell_off": sum(r["fell_off"] for r in records),
+        "declutter_rate": removed / placed if placed else None,
+        "declutter_ci95_bootstrap": bootstrap_ratio_interval(
+            [r["removed"] for r in records], [r["n_objects"] for r in records],
+            random_state=rng_d),
+        "rounds_cleared": sum(r["left"] == 0 for r in records),
+        "end_reasons": dict(sorted(ends.items(), key=lambda kv: -kv[1])),
+        "failure_reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1])),
+        "metric_n": len(verdicts),
+        "metric_accuracy": (sum(bool(t["metric"]) for t in verdicts) / len(verdicts)
+                            if verdicts else None),
+        "planning_seconds": planning_stats(
+            [t.get("planning_seconds") for t in attempts]
+            + [r.get("end_planning_seconds") for r in records]),
+        "seconds_per_round": (float(np.mean([r["seconds"] for r in records]))
+                              if records else None),
+    }
+
+
+def rounds_markdown(s: dict) -> str:
+    """The clutter-removal summary as a Markdown report."""
+    def pct(x):
+        return "n/a" if x is None else f"{100 * x:.1f} %"
+
+    def ci(v):
+        return "n/a" if v is None or v[0] is None else f"{pct(v[0])} - {pct(v[1])}"
+
+    n_obj = (s.get("config") or {}).get("n_objects")
+    lines = [
+        f"# Clutter removal: detector `{s.get('detector')}` on `{s.get('objects')}` objects",
+        "",
+        f"- rounds: {s['rounds']} of {n_obj} objects (seed {s.get('seed')}); a round ends when "
+        f"the table is clear, nothing is proposed, or after {MAX_CONSECUTIVE_FAILURES} "
+        "consecutive failures",
+        f"- grasp success rate: {s['successes']}/{s['attempts']} = {pct(s['success_rate'])} "
+        f"(Wilson 95 % {ci(s['success_ci95'])}; bootstrap over rounds "
+        f"{ci(s['success_ci95_bootstrap'])})",
+        f"- declutter rate: {s['removed']}/{s['objects_placed']} objects removed by successful "
+        f"grasps = {pct(s['declutter_rate'])} (bootstrap over rounds "
+        f"{ci(s['declutter_ci95_bootstrap'])}); {s['fell_off']} fell off the table (removed, "
+        "not counted as successes); "
+        f"{s['rounds_cleared']} of {s['rounds']} rounds ended with an empty table",
+        f"- rectangle-metric accuracy of the executed grasps: {pct(s['metric_accuracy'])} "
+        f"(n = {s['metric_n']})",
+        _planning_line(s.get("planning_seconds")),
+        "",
+        "| round ended by | rounds |",
+        "|---|---|",
+    ]
+    lines += [f"| {k} | {v} |" for k, v in s["end_reasons"].items()]
+    lines += ["", "| failure reason | grasps |", "|---|---|"]
+    lines += [f"| {k} | {v} |" for k, v in s["failure_reasons"].items()]
+    return "\n".join(lines) + "\n"
