@@ -10,11 +10,13 @@ Action: ``Box(5)`` = ``(x, y, theta, w, h)`` in pixels and radians (the
 :class:`~dlsr.rectangles.GraspRectangle` convention); values are clipped to the action space.
 
 Reward 1.0 when the grasp lifts an object (>= 10 cm, held by both fingers), else 0.0.
-``info``: ``success``, ``failure_reason`` (None on success), ``lift_height`` (m), ``gripper_pose``
-(the executed 4x4 ``T_world_tcp``, or None when nothing was executed), ``object`` (the name of
-the object between the jaws, or None), and ``rectangle_metric`` (bool) when the episode was reset
-with ``options={"label": True}``: the action against the scene's physics-labelled positives
-(also given as ``info["positives"]`` by ``reset``).
+``reset``'s ``info`` has the camera's intrinsics ``K`` (3, 3, pixels) and pose ``T_world_cam``
+(4, 4; OpenCV camera frame to world, metres), as the trial harness gives detectors.
+``step``'s ``info``: ``success``, ``failure_reason`` (None on success), ``lift_height`` (m),
+``gripper_pose`` (the executed 4x4 ``T_world_tcp``, or None when nothing was executed),
+``object`` (the name of the object between the jaws, or None), and ``rectangle_metric`` (bool)
+when the episode was reset with ``options={"label": True}``: the action against the scene's
+physics-labelled positives (also given as ``info["positives"]`` by ``reset``).
 
 Default episode: one object, one grasp (``terminated`` after the step). ``declutter=True``:
 ``n_objects`` objects; a grasped object is removed (and so are objects pushed off the table,
@@ -102,6 +104,13 @@ class GraspEnv(gym.Env):
             "depth_valid": np.asarray(f.depth_valid, dtype=np.uint8).copy(),
         }
 
+    def _camera_info(self):
+        """``K`` (3, 3) and ``T_world_cam`` (4, 4) of the current observation, as the trial
+        harness gives them to detectors (:class:`graspsim.detectors.GraspDetector`)."""
+        f = self._frame
+        return {"K": np.array(f.intrinsics.K, dtype=np.float64),
+                "T_world_cam": np.array(f.T_world_cam, dtype=np.float64)}
+
     def _label(self):
         f = self._frame
         cands = sample_candidates(f.segmentation, self._bodies.objects, self.np_random,
@@ -123,7 +132,7 @@ class GraspEnv(gym.Env):
         self._positives = None
         obs = self._observe()
         info = {"objects": [o.spec.name for o in self._scene.objects],
-                "redraws": list(self._scene.redraws)}
+                "redraws": list(self._scene.redraws), **self._camera_info()}
         if self._label_scenes:
             self._label()
             info["positives"] = np.array([r.as_array() for r in self._positives],
@@ -171,6 +180,7 @@ class GraspEnv(gym.Env):
         info["fell_off"] = [names[i] for i in fell]
         terminated = len(self._scene.objects) == 0
         obs = self._observe()
+        info.update(self._camera_info())  # of the new observation
         if self._label_scenes and not terminated:
             self._label()
         return obs, reward, terminated, False, info

@@ -231,8 +231,8 @@ def propose(detector, obs, name: str | None = None):
         out = detector.predict(obs)
     except Exception as exc:
         msg = " ".join(str(exc).split())
-        return [], None, f"detector error: {type(exc).__name__}: {msg}".rstrip(": "), \
-            time.perf_counter() - t0
+        error = f"detector error: {type(exc).__name__}" + (f": {msg}" if msg else "")
+        return [], None, error, time.perf_counter() - t0
     seconds = time.perf_counter() - t0
     rects, scores = check_detections(out, name)
     return rects, scores, None, seconds

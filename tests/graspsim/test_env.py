@@ -31,6 +31,7 @@ def test_registration_and_spaces(env):
     assert spec.entry_point == "graspsim.env:GraspEnv"
     assert spec.max_episode_steps is not None
     obs, info = env.reset(seed=0)
+    assert info["K"].shape == (3, 3) and info["T_world_cam"].shape == (4, 4)
     assert obs["rgb"].shape == (480, 640, 3) and obs["rgb"].dtype == np.uint8
     assert obs["depth"].shape == (480, 640) and obs["depth"].dtype == np.float32
     assert obs["depth_valid"].shape == (480, 640) and obs["depth_valid"].dtype == np.uint8
