@@ -339,6 +339,12 @@ def _plugin_in_worker(spec, path):
     return det
 
 
+def one_line(exc: BaseException) -> str:
+    """``"TypeName: message"`` of an exception on one line (whitespace runs become a space)."""
+    msg = " ".join(str(exc).split())
+    return type(exc).__name__ + (f": {msg}" if msg else "")
+
+
 def _module_folder(module) -> str | None:
     """The ``sys.path`` entry a top-level module or package was imported from."""
     top = sys.modules.get(module.__name__.split(".")[0], module)
@@ -361,7 +367,7 @@ def _import_module(spec: str, module_name: str):
         except ModuleNotFoundError as exc:
             if not missing(exc):
                 raise ValueError(f"detector {spec!r}: importing {module_name!r} failed: "
-                                 f"ModuleNotFoundError: {exc}") from exc
+                                 f"{one_line(exc)}") from exc
             cwd = os.getcwd()
             if attempt or cwd in sys.path:
                 raise ValueError(
@@ -372,7 +378,7 @@ def _import_module(spec: str, module_name: str):
             importlib.invalidate_caches()
         except Exception as exc:
             raise ValueError(f"detector {spec!r}: importing {module_name!r} failed: "
-                             f"{type(exc).__name__}: {exc}") from exc
+                             f"{one_line(exc)}") from exc
     raise AssertionError("unreachable")  # pragma: no cover
 
 
@@ -383,8 +389,7 @@ def _instantiate(spec: str, obj, what: str):
             obj = obj()
         except Exception as exc:
             raise ValueError(f"detector {spec!r}: calling {what}() failed (NAME must be a class "
-                             f"or a factory taking no argument): {type(exc).__name__}: "
-                             f"{exc}") from exc
+                             f"or a factory taking no argument): {one_line(exc)}") from exc
     if not callable(getattr(obj, "predict", None)):
         raise ValueError(f"detector {spec!r}: {what} gave a {type(obj).__name__} with no "
                          "predict(obs) method")
@@ -425,7 +430,7 @@ def _load_entry_point(name: str) -> PluginDetector | None:
         obj = ep.load()
     except Exception as exc:
         raise ValueError(f"detector {name!r}: loading the entry point {ep.value!r} "
-                         f"({ENTRY_POINT_GROUP}) failed: {type(exc).__name__}: {exc}") from exc
+                         f"({ENTRY_POINT_GROUP}) failed: {one_line(exc)}") from exc
     module = sys.modules.get(ep.value.partition(":")[0].strip())
     return PluginDetector(name, _instantiate(name, obj, ep.value),
                           None if module is None else _module_folder(module))

@@ -42,7 +42,7 @@ import numpy as np
 
 from dlsr.metrics import rectangle_metric
 
-from .detectors import check_detections, load_detector
+from .detectors import check_detections, load_detector, one_line
 from .execution import ExecutionParams, execute_grasp, run_grasp
 from .grasp import rectangle_to_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
@@ -230,9 +230,7 @@ def propose(detector, obs, name: str | None = None):
     try:
         out = detector.predict(obs)
     except Exception as exc:
-        msg = " ".join(str(exc).split())
-        error = f"detector error: {type(exc).__name__}" + (f": {msg}" if msg else "")
-        return [], None, error, time.perf_counter() - t0
+        return [], None, f"detector error: {one_line(exc)}", time.perf_counter() - t0
     seconds = time.perf_counter() - t0
     rects, scores = check_detections(out, name)
     return rects, scores, None, seconds
