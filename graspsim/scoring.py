@@ -18,14 +18,14 @@ or ``pcdXXXXcpos.txt`` files). Rectangles are in the pixels of the dataset's ima
 of an image's rectangles is their rank (rank 1 is executed for top-1):
 
 * ``csv``: one file, lines ``image,x,y,theta_deg,w,h[,score]`` (an optional header line with
-  exactly these names). ``image`` is the id :func:`dlsr.datasets.load_cornell` gives
-  (``0000`` for ``pcd0000``; ``0`` is read as ``0000``); ``x`` column and ``y`` row of the centre,
-  ``theta_deg`` the closing direction in degrees counter-clockwise as displayed, ``w`` the
-  opening and ``h`` the jaw size in pixels (this project's convention, CONTRIBUTING.md). Rows of
-  an image keep file order unless a ``score`` column is present; then they are ranked by
-  decreasing score (ties keep file order). A non-numeric or non-finite value, a non-positive
-  size, a wrong column count or an image id that is not in the dataset is an error naming the
-  file and line.
+  exactly these names; blank lines and lines starting with ``#`` are ignored). ``image`` is the
+  id :func:`dlsr.datasets.load_cornell` gives (``0000`` for ``pcd0000``; ``0`` is read as
+  ``0000``); ``x`` column and ``y`` row of the centre, ``theta_deg`` the closing direction in
+  degrees counter-clockwise as displayed, ``w`` the opening and ``h`` the jaw size in pixels
+  (this project's convention, CONTRIBUTING.md). Rows of an image keep file order unless a
+  ``score`` column is present; then they are ranked by decreasing score (ties keep file
+  order). A non-numeric or non-finite value, a non-positive size, a wrong column count or an
+  image id that is not in the dataset is an error naming the file and line.
 * ``cornell``: a folder (searched recursively) with one file per image named
   ``pcdXXXX_pred.txt`` or ``pcdXXXXcpos.txt``: four ``x y`` corner lines per rectangle in
   Cornell order, read with :func:`dlsr.datasets.read_cornell_rectangles` (a rectangle with
@@ -155,8 +155,12 @@ def manifest_specs(manifest: dict) -> dict:
         d = dict(rec)
         urdf = d.pop("urdf")
         path = assets_dir() / urdf["builtin"] if "builtin" in urdf else Path(urdf["path"])
-        specs[name] = ObjectSpec(
-            urdf=path, **{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
+        try:
+            specs[name] = ObjectSpec(
+                urdf=path, **{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
+        except TypeError as exc:
+            raise ValueError(f"scenes.json: object {name!r} does not describe an ObjectSpec of "
+                             f"this graspsim ({exc})") from None
     return specs
 
 
@@ -166,8 +170,12 @@ def execution_params(manifest: dict):
     from .gripper import GripperParams
 
     d = dict(manifest["execution"])
-    d["gripper"] = GripperParams(**d["gripper"])
-    return ExecutionParams(**d)
+    try:
+        d["gripper"] = GripperParams(**d["gripper"])
+        return ExecutionParams(**d)
+    except (TypeError, KeyError) as exc:
+        raise ValueError("scenes.json: the execution parameters do not match this graspsim's "
+                         f"ExecutionParams ({exc!r})") from None
 
 
 def rebuild_scene(entry: dict, specs: dict):

@@ -247,6 +247,10 @@ def test_ray_gives_the_records_of_loky(dataset, tmp_path):
     finally:
         ray.shutdown()
     assert strip(b["records"]) == strip(a["records"])
+    # Executed in fresh worker processes, the labelled rectangles keep their labels.
+    for rec, x in zip(a["records"], samples, strict=True):
+        labels = [False] * len(x.negatives[:1]) + [True] * len(x.positives[:1])
+        assert [t["success"] for t in rec["attempts"]] == labels
     assert db["fingerprint"] == da["fingerprint"]
     for x, y in zip(load_cornell(tmp_path / "da"), load_cornell(tmp_path / "db"), strict=True):
         np.testing.assert_array_equal(x.depth, y.depth)
