@@ -109,8 +109,9 @@ def snap_rectangles(rects) -> list[GraspRectangle]:
         t = round(float(normalize_angle(r.theta)), rad)
         if abs(t) > _THETA_EDGE:
             t = -_THETA_EDGE
-        out.append(GraspRectangle(round(float(r.x), px), round(float(r.y), px), t,
-                                  round(float(r.w), px), round(float(r.h), px)))
+        # Sizes below the grid stay positive (the smallest grid step).
+        w, h = (max(round(float(v), px), 10.0**-px) for v in (r.w, r.h))
+        out.append(GraspRectangle(round(float(r.x), px), round(float(r.y), px), t, w, h))
     return out
 
 

@@ -47,6 +47,8 @@ def test_snapped_rectangles_survive_a_corner_file(tmp_path):
     path = tmp_path / "r.txt"
     path.write_text(_format_corners(snapped))
     assert snap_rectangles(read_cornell_rectangles(path)) == snapped
+    tiny = snap_rectangles([GraspRectangle(1.0, 2.0, 0.0, 1e-8, 3e-7)])[0]
+    assert tiny.w > 0 and tiny.h > 0
 
 
 def test_manifest_describes_every_image(dataset, easy_objects):
