@@ -3,57 +3,167 @@
 * :func:`make_dataset` (``graspsim dataset``): random single-object scenes, rendered with the
   Kinect-like camera, candidates proposed on the object mask and labelled by executing them
   (:func:`graspsim.labelling.label_rectangles`); written through
-  :func:`dlsr.datasets.write_cornell` with the object names as object ids, so every dlsr
+  :func:`dlsr.datasets.write_cornell_image` with the object names as object ids, so every dlsr
   benchmark reads it with :func:`dlsr.datasets.load_cornell` unchanged.
 * :func:`make_patches` (``graspsim patches``): random scenes and random rectangles on them,
   turned into 24x24 8-channel rectangle images (:func:`dlsr.preprocess.rectangle_images`, layout
   ``[K, R, G, B, D, Nx, Ny, Nz]``), from which random 6x6x8 patches with their masks are drawn
   (:func:`dlsr.patches.sample_patches`) and saved with :func:`dlsr.patches.save_patch_file`.
 
-Scene ``i`` of a run with seed ``s`` draws from ``SeedSequence(s, spawn_key=(i,))``, so results
-do not depend on ``n_jobs``.
+Scene ``i`` of a run with seed ``s`` draws from ``SeedSequence(s, spawn_key=(i,))``
+(:func:`graspsim.trials.trial_streams`), so results do not depend on ``n_jobs`` or the backend.
+
+Dataset folder
+--------------
+Besides the Cornell files (``NN/pcdXXXXr.png``, ``NN/pcdXXXXd.tiff`` -- float32 metres, 0 where
+the simulated sensor gave no depth --, ``NN/pcdXXXXcpos.txt``, ``NN/pcdXXXXcneg.txt``,
+``image_objects.txt``) :func:`make_dataset` writes:
+
+* ``NN/pcdXXXXcamera.json``, one per image, for detectors that need the camera:
+  ``{"image", "width", "height", "K", "T_world_cam", "depth_unit", "frame"}`` with ``K`` the
+  3x3 intrinsic matrix (pixels; pixel centres at integer coordinates) and ``T_world_cam`` the
+  4x4 pose of the camera in the world (metres), camera frame OpenCV (x right, y down, z along
+  the optical axis); the world's z axis points up from the table top at ``z = table_z``.
+* ``scenes.json``, the manifest :mod:`graspsim.scoring` rebuilds scenes from (its sha256 is the
+  dataset's fingerprint): ``format`` (``"graspsim-dataset/1"``), ``generator`` (seed, objects,
+  candidates and objects per scene, how scene streams are derived), ``execution``
+  (:class:`graspsim.execution.ExecutionParams` as a dict), ``grasp_depth`` (``"observed"``:
+  rectangles become poses with the image's own depth, the ``d.tiff``), ``rectangle_grid`` (see
+  :func:`snap_rectangles`), ``object_specs`` (name -> what :func:`graspsim.objects.load_object`
+  needs: URDF path relative to the built-in assets when it is one of them, mass, friction,
+  scale, ...), and ``images``: one entry per image with ``image`` (the id
+  :func:`dlsr.datasets.load_cornell` gives, ``"0000"``), ``index`` and ``seed`` (scene ``index``
+  of the generator ``seed``), ``files`` (paths relative to the root), ``depth_sha256``,
+  ``objects`` (name, settled base-link ``position`` in metres and ``orientation`` quaternion
+  ``x, y, z, w``, exactly as simulated), ``table`` (``z``, ``rgba``), ``camera`` (as in the
+  per-image file plus ``near``/``far``), ``redraws``, label counts and outcomes.
+* ``scenes.jsonl`` (the same image entries, one line per finished scene, for resuming),
+  ``dataset_config.json`` (the configuration, checked on resume) and ``labels.json`` (counts).
+
+Rebuilding a scene from its recorded poses (:func:`graspsim.scene.build_scene`) gives the state
+the labelling executed every candidate in, bit for bit; the poses are also exactly those the
+seeded construction gives again.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
-import os
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
+from dlsr.rectangles import GraspRectangle, normalize_angle
+
 from .labelling import label_rectangles, sample_candidates
 
-__all__ = ["make_dataset", "make_patches", "scene_sample"]
+__all__ = [
+    "MANIFEST",
+    "MANIFEST_FORMAT",
+    "RECTANGLE_GRID",
+    "make_dataset",
+    "make_patches",
+    "scene_sample",
+    "snap_rectangles",
+]
 
 log = logging.getLogger(__name__)
 
-_WORKER = {}
+MANIFEST = "scenes.json"
+"""File name of a dataset's manifest (see the module docstring)."""
+
+MANIFEST_FORMAT = "graspsim-dataset/1"
+
+RECTANGLE_GRID = {"x_y_w_h_decimals": 6, "theta_decimals": 9}
+"""Resolution rectangles are executed at: pixels to 6 decimals, radians to 9 (see
+:func:`snap_rectangles`)."""
+
+# The grid point closest to pi/2 inside [-pi/2, pi/2) (1.570796326 with 9 decimals).
+_DEC = RECTANGLE_GRID["theta_decimals"]
+_THETA_EDGE = float(round(np.floor(np.pi / 2 * 10.0**_DEC) / 10.0**_DEC, _DEC))
+
+def snap_rectangles(rects) -> list[GraspRectangle]:
+    """Rectangles on the execution grid: ``x, y, w, h`` to 1e-6 px, ``theta`` to 1e-9 rad.
+
+    Labelling and scoring both execute snapped rectangles, so a labelled rectangle written to
+    a file with at least 8 significant decimals (the Cornell corner files have 10) and read
+    back -- a change of about 1e-10 -- snaps to the very same values and executes exactly as
+    it was labelled; physics is not smooth in the last bits of a pose. The change, at most
+    5e-7 px and 5e-10 rad (about 1.6e-9 rad at the wrap-around of ``theta``, folded onto the
+    grid point inside ``[-pi/2, pi/2)``), has no physical meaning.
+
+    Parameters
+    ----------
+    rects : sequence of GraspRectangle
+
+    Returns
+    -------
+    list of GraspRectangle
+    """
+    px, rad = RECTANGLE_GRID["x_y_w_h_decimals"], RECTANGLE_GRID["theta_decimals"]
+    out = []
+    for r in rects:
+        t = round(float(normalize_angle(r.theta)), rad)
+        if abs(t) > _THETA_EDGE:
+            t = -_THETA_EDGE
+        # Sizes below the grid stay positive (the smallest grid step).
+        w, h = (max(round(float(v), px), 10.0**-px) for v in (r.w, r.h))
+        out.append(GraspRectangle(round(float(r.x), px), round(float(r.y), px), t, w, h))
+    return out
 
 
-def _sim():
-    from .sim import Simulation
+def _spec_record(spec) -> dict:
+    """What :func:`graspsim.objects.load_object` needs to load ``spec`` again, as JSON."""
+    from .objects import assets_dir
 
-    pid = os.getpid()
-    if pid not in _WORKER:
-        _WORKER.clear()
-        _WORKER[pid] = Simulation()
-    return _WORKER[pid]
+    urdf = Path(spec.urdf)
+    try:
+        rel = urdf.resolve().relative_to(assets_dir().resolve())
+        urdf_rec = {"builtin": rel.as_posix()}
+    except ValueError:
+        urdf_rec = {"path": str(urdf.resolve())}
+    d = asdict(spec)
+    d["urdf"] = urdf_rec
+    d["size"] = list(spec.size)
+    d["tags"] = list(spec.tags)
+    d["rgba"] = None if spec.rgba is None else list(spec.rgba)
+    return d
+
+
+def _camera_record(frame) -> dict:
+    intr = frame.intrinsics
+    return {"width": int(intr.width), "height": int(intr.height),
+            "K": np.asarray(intr.K, dtype=float).tolist(),
+            "T_world_cam": np.asarray(frame.T_world_cam, dtype=float).tolist(),
+            "near": float(intr.near), "far": float(intr.far),
+            "depth_unit": "m", "frame": "OpenCV (x right, y down, z forward); T_world_cam "
+            "maps camera coordinates to world coordinates (metres, z up)"}
 
 
 def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects: int = 1):
-    """One labelled scene as a :class:`dlsr.datasets.GraspSample` (plus labelling counts)."""
+    """One labelled scene.
+
+    Returns
+    -------
+    sample : dlsr.datasets.GraspSample
+    reasons : dict
+        Outcome counts (``"success"`` or the failure reason).
+    entry : dict
+        The scene's manifest entry without ``files`` and ``depth_sha256`` (objects and their
+        exact poses, table, camera); see the module docstring.
+    """
     from dlsr.datasets import GraspSample
 
-    from .trials import observe_scene
+    from .trials import _worker_sim, observe_scene
 
-    sim = _sim()
+    sim = _worker_sim()
     scene, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects)
     cands = sample_candidates(frame.segmentation, bodies.objects, st["label"], n_candidates,
                               depth=frame.depth_clean)
-    labelled = label_rectangles(sim, scene, frame, cands)
+    labelled = label_rectangles(sim, scene, frame, snap_rectangles(cands))
     mask = np.isin(frame.segmentation, bodies.objects)
     sample = GraspSample(
         image_id=f"{index:04d}",
@@ -68,11 +178,23 @@ def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects
     reasons = {}
     for r in labelled.results:
         reasons[r.reason or "success"] = reasons.get(r.reason or "success", 0) + 1
-    return sample, reasons
+    entry = {
+        "image": sample.image_id, "index": int(index), "seed": int(seed),
+        "objects": [{"name": o.spec.name, "position": [float(v) for v in o.position],
+                     "orientation": [float(v) for v in o.orientation]} for o in scene.objects],
+        "table": {"z": float(scene.table_z), "rgba": [float(v) for v in scene.table_rgba]},
+        "camera": _camera_record(frame),
+        "redraws": list(scene.redraws),
+    }
+    return sample, reasons, entry
 
 
 def _scene_task(specs, seed, index, n_candidates, n_objects):
     return scene_sample(specs, seed, index, n_candidates, n_objects)
+
+
+def _sha256(path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: int = 0,
@@ -82,7 +204,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
 
     Each scene is written as soon as it is labelled and recorded in ``scenes.jsonl``; a rerun
     with the same arguments skips the recorded scenes (a different configuration in the same
-    folder is an error).
+    folder is an error). At the end the manifest ``scenes.json`` lists every image with what
+    an exact rebuild of its scene needs (see the module docstring).
 
     Parameters
     ----------
@@ -91,11 +214,12 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     objects : {"train", "test", "all"} or list of ObjectSpec
     out : str or Path
         Root folder (``00/pcd0000r.png``, ``pcd0000d.tiff``, ``pcd0000cpos.txt``,
-        ``pcd0000cneg.txt``, ..., ``image_objects.txt``) plus ``labels.json`` (counts) and
-        ``scenes.jsonl`` (one line per finished scene).
+        ``pcd0000cneg.txt``, ``pcd0000camera.json``, ..., ``image_objects.txt``) plus
+        ``scenes.json`` (the manifest), ``labels.json`` (counts) and ``scenes.jsonl`` (one line
+        per finished scene).
     seed : int
     n_candidates : int
-        Rectangles labelled per scene.
+        Rectangles labelled per scene (snapped with :func:`snap_rectangles`).
     n_objects : int
     n_jobs : int
         Local worker processes (ignored when ``executor`` is given).
@@ -105,10 +229,12 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     Returns
     -------
     dict
-        Counts: images, positives, negatives, failure reasons, seconds, labelled rectangles/s.
+        Counts: images, positives, negatives, failure reasons, seconds, labelled rectangles/s,
+        and ``manifest`` (the path of ``scenes.json``) with its ``fingerprint`` (sha256).
     """
     from dlsr.datasets import write_cornell_image, write_cornell_mapping
 
+    from .execution import ExecutionParams
     from .executor import Executor
     from .trials import read_done, resolve_objects
 
@@ -117,7 +243,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     specs = resolve_objects(objects)
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
-    meta = {"objects": objects if isinstance(objects, str) else [s.name for s in specs],
+    meta = {"format": MANIFEST_FORMAT,
+            "objects": objects if isinstance(objects, str) else [s.name for s in specs],
             "seed": seed, "n_candidates": n_candidates, "n_objects": n_objects}
     meta_path = root / "dataset_config.json"
     if meta_path.exists() and json.loads(meta_path.read_text()) != meta:
@@ -129,22 +256,46 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     todo = [i for i in range(n_scenes) if i not in done]
     if done:
         log.info("resuming dataset: %d of %d scenes already written", n_scenes - len(todo),
-                    n_scenes)
+                 n_scenes)
     t0 = time.perf_counter()
     ex = executor or Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
                               progress=progress)
     tasks = [(specs, seed, i, n_candidates, n_objects) for i in todo]
     with log_path.open("a") as fh:
-        for i, (sample, rs) in zip(todo, ex.imap(_scene_task, tasks, desc="scenes", star=True),
-                                   strict=True):
+        for i, (sample, rs, entry) in zip(
+                todo, ex.imap(_scene_task, tasks, desc="scenes", star=True), strict=True):
             line = write_cornell_image(sample, root, i)
-            rec = {"index": i, "mapping": line, "positives": len(sample.positives),
-                   "negatives": len(sample.negatives), "outcomes": rs}
+            folder = f"{i // 100:02d}"
+            stem = f"{folder}/pcd{i:04d}"
+            files = {"rgb": f"{stem}r.png", "depth": f"{stem}d.tiff",
+                     "positives": f"{stem}cpos.txt", "negatives": f"{stem}cneg.txt",
+                     "camera": f"{stem}camera.json"}
+            cam = {"image": entry["image"], **{k: entry["camera"][k] for k in
+                   ("width", "height", "K", "T_world_cam", "depth_unit", "frame")}}
+            (root / files["camera"]).write_text(json.dumps(cam, indent=1) + "\n")
+            rec = {**entry, "files": files, "depth_sha256": _sha256(root / files["depth"]),
+                   "object_id": sample.object_id, "mapping": line,
+                   "positives": len(sample.positives), "negatives": len(sample.negatives),
+                   "outcomes": rs}
             fh.write(json.dumps(rec) + "\n")
             fh.flush()
             done[i] = rec
     records = [done[i] for i in sorted(done) if i < n_scenes]
     write_cornell_mapping(root, [r["mapping"] for r in records if r["mapping"]])
+    used = {o["name"] for r in records for o in r["objects"]}
+    manifest = {
+        "format": MANIFEST_FORMAT,
+        "generator": {**{k: meta[k] for k in ("seed", "objects", "n_candidates", "n_objects")},
+                      "scene_streams": "numpy SeedSequence(seed, spawn_key=(index,)), "
+                                       "graspsim.trials.trial_streams"},
+        "execution": asdict(ExecutionParams()),
+        "grasp_depth": "observed",
+        "rectangle_grid": dict(RECTANGLE_GRID),
+        "object_specs": {s.name: _spec_record(s) for s in specs if s.name in used},
+        "images": [{k: v for k, v in r.items() if k != "mapping"} for r in records],
+    }
+    manifest_path = root / MANIFEST
+    manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
     reasons: dict[str, int] = {}
     for r in records:
         for k, v in r["outcomes"].items():
@@ -159,6 +310,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         "seconds_this_run": round(seconds, 2),
         "labelled_rectangles_per_second": (round(len(todo) * n_candidates / seconds, 2)
                                            if todo and seconds > 0 else None),
+        "manifest": str(manifest_path),
+        "fingerprint": _sha256(manifest_path),
     }
     (root / "labels.json").write_text(json.dumps(stats, indent=2) + "\n")
     return stats
@@ -167,9 +320,9 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
 def _patch_scene(specs, seed, index, rects_per_scene, n_objects):
     from dlsr.preprocess import rectangle_images
 
-    from .trials import observe_scene
+    from .trials import _worker_sim, observe_scene
 
-    sim = _sim()
+    sim = _worker_sim()
     scene, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects)
     rects = sample_candidates(frame.segmentation, bodies.objects, st["label"], rects_per_scene,
                               depth=frame.depth_clean)
@@ -181,7 +334,7 @@ def _patch_scene(specs, seed, index, rects_per_scene, n_objects):
 
 def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int = 0,
                  n_scenes: int | None = None, rects_per_scene: int = 20, n_objects: int = 1,
-                 n_jobs: int = 1, progress: bool = False) -> dict:
+                 n_jobs: int = 1, progress: bool = False, executor=None) -> dict:
     """Random 6x6x8 patches (and masks) of rectangle images from random rendered scenes.
 
     Parameters
@@ -197,6 +350,13 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
         Scenes to render; default ``max(2, ceil(n / 2000))``.
     rects_per_scene : int
         Random rectangles (on the objects) per scene.
+    n_objects : int
+        Objects per scene.
+    n_jobs : int
+        Local worker processes (ignored when ``executor`` is given).
+    progress : bool
+    executor : graspsim.executor.Executor or None
+        Where scenes run (local cores or a Ray cluster); results do not depend on it.
 
     Returns
     -------
@@ -213,8 +373,8 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
     specs = resolve_objects(objects)
     n_scenes = max(2, int(np.ceil(n / 2000))) if n_scenes is None else int(n_scenes)
     t0 = time.perf_counter()
-    ex = Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
-                  progress=progress)
+    ex = executor or Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
+                              progress=progress)
     tasks = [(specs, seed, i, rects_per_scene, n_objects) for i in range(n_scenes)]
     parts = list(ex.imap(_patch_scene, tasks, desc="scenes", star=True))
     images = np.concatenate([p[0] for p in parts])

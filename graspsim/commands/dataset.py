@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from . import add_executor_args, executor_from_args
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -15,7 +17,7 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--candidates", type=int, default=48, help="rectangles labelled per scene")
     p.add_argument("--objects-per-scene", type=int, default=1)
-    p.add_argument("--jobs", type=int, default=1)
+    add_executor_args(p)
     p.set_defaults(func=_run)
 
 
@@ -24,7 +26,7 @@ def _run(args: argparse.Namespace) -> int:
 
     s = make_dataset(n_scenes=args.scenes, objects=args.objects, out=args.out, seed=args.seed,
                      n_candidates=args.candidates, n_objects=args.objects_per_scene,
-                     n_jobs=args.jobs, progress=True)
+                     executor=executor_from_args(args))
     print(f"wrote {s['images']} images ({s['positives']} positives, {s['negatives']} negatives) "
-          f"to {args.out}")
+          f"to {args.out}; manifest {s['manifest']} (sha256 {s['fingerprint'][:12]}...)")
     return 0

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from . import add_executor_args, executor_from_args
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -14,7 +16,7 @@ def register(subparsers) -> None:
     p.add_argument("--objects", default="all", choices=["train", "test", "all"])
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--scenes", type=int, default=None, help="default: n / 2000")
-    p.add_argument("--jobs", type=int, default=1)
+    add_executor_args(p)
     p.set_defaults(func=_run)
 
 
@@ -22,6 +24,6 @@ def _run(args: argparse.Namespace) -> int:
     from graspsim.datagen import make_patches
 
     s = make_patches(n=args.n, out=args.out, objects=args.objects, seed=args.seed,
-                     n_scenes=args.scenes, n_jobs=args.jobs, progress=True)
+                     n_scenes=args.scenes, executor=executor_from_args(args))
     print(f"wrote {s['n']} patches from {s['scenes']} scenes to {s['path']}")
     return 0
