@@ -21,6 +21,7 @@ COMMANDS = [
     "trials",
     "dataset",
     "patches",
+    "compare",
 ]
 
 
