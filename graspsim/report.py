@@ -270,8 +270,7 @@ def plot_success_per_object(summaries: dict, path) -> Path:
     longest = max(len(o) for o in objects)
     fig, ax = plt.subplots(figsize=(1.5 + 0.08 * longest + 1.1 * len(names),
                                     1.4 + 0.32 * len(objects)))
-    cmap = plt.get_cmap("viridis").copy()
-    cmap.set_bad("#dddddd")
+    cmap = plt.get_cmap("viridis").with_extremes(bad="#dddddd")  # gray: no trial
     im = ax.imshow(np.ma.masked_invalid(rate), cmap=cmap, vmin=0, vmax=1, aspect="auto")
     for i in range(len(objects)):
         for j in range(len(names)):
