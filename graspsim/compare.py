@@ -22,7 +22,9 @@ other failed. For each pair of folders this module gives
 * a verdict: which detector is better at the 5 % level (by the McNemar test), or that the two
   are not separated. The interval is an approximation and the exact test is conservative, so
   with few discordant scenes they can disagree (an interval just excluding 0 with p above 5 %);
-  the verdict follows the test and then says so.
+  the verdict follows the test and then says so. (Fagerland, Lydersen and Laake, BMC Medical
+  Research Methodology 13:91, 2013, find the exact conditional test conservative and prefer
+  its mid-p version; the exact test is kept here because a verdict should not overstate.)
 
 Folders
 -------
