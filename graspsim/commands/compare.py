@@ -12,7 +12,7 @@ def register(subparsers) -> None:
         "compare",
         help="paired comparison of trial (or score) folders run on the same scenes",
         description="Compare every pair of the given folders scene by scene: both / only A / "
-                    "only B / neither, the difference in success rate with Newcombe's 95 %% "
+                    "only B / neither, the difference in success rate with Newcombe's 95 % "
                     "interval for paired proportions, the exact McNemar p-value and a verdict. "
                     "Trial folders must share seed, objects and objects per scene; score "
                     "folders the dataset fingerprint. Scenes present in only one folder are "
