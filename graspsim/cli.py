@@ -22,6 +22,7 @@ COMMANDS = [
     "dataset",
     "patches",
     "score",
+    "compare",
 ]
 
 

@@ -15,7 +15,15 @@ from pathlib import Path
 
 log = logging.getLogger(__name__)
 
-__all__ = ["write_report", "render_markdown", "render_html"]
+__all__ = [
+    "write_report",
+    "render_markdown",
+    "render_html",
+    "plot_success_rates",
+    "plot_success_per_object",
+    "plot_verdicts",
+    "plot_paired_differences",
+]
 
 # The paper's headline numbers (Trottier et al. 2016; shared/reference/dlsr-reference-facts.md).
 PAPER = {
@@ -160,6 +168,269 @@ def _trial_gifs(root: Path, records: list[dict], config, pics: Path) -> list[tup
     return out
 
 
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    _pyplot().close(fig)
+    return path
+
+
+def _finite_ci(ci) -> bool:
+    return ci is not None and all(v is not None and v == v for v in ci)
+
+
+def plot_success_rates(summaries: dict, path) -> Path:
+    """Physical success rate per detector with its Wilson 95 % interval, on all objects and on
+    the objects the manifest marks graspable.
+
+    Parameters
+    ----------
+    summaries : dict
+        Detector name -> trial summary (:func:`graspsim.trials.summarize`: ``successes``,
+        ``n``, ``success_rate``, ``success_ci95``, ``graspable_*``).
+    path : str or Path
+        The PNG written.
+
+    Returns
+    -------
+    Path
+    """
+    plt = _pyplot()
+    names = list(summaries)
+    if not names:
+        raise ValueError("no trial summaries to plot")
+    fig, ax = plt.subplots(figsize=(8, 1.2 + 0.7 * len(names)))
+    series = (("all test objects", "", "o", "tab:blue", -0.15),
+              ("graspable objects only", "graspable_", "s", "tab:orange", 0.15))
+    for label, pre, marker, color, dy in series:
+        ys, xs, lo, hi, texts = [], [], [], [], []
+        for i, name in enumerate(names):
+            s = summaries[name]
+            rate, ci = s.get(f"{pre}success_rate"), s.get(f"{pre}success_ci95")
+            if rate is None or not _finite_ci(ci):
+                continue
+            ys.append(i + dy)
+            xs.append(100 * rate)
+            lo.append(100 * (rate - ci[0]))
+            hi.append(100 * (ci[1] - rate))
+            k = s["successes"] if not pre else round(rate * s["graspable_n"])
+            n = s["n"] if not pre else s["graspable_n"]
+            texts.append((100 * ci[1], i + dy, f"{k}/{n}"))
+        ax.errorbar(xs, ys, xerr=[lo, hi], fmt=marker, color=color, capsize=3, label=label)
+        for x, y, t in texts:
+            ax.text(x + 1.5, y, t, va="center", fontsize=8, color=color)
+    ax.set_yticks(range(len(names)), names)
+    ax.set_ylim(len(names) - 0.5, -0.5)
+    ax.set_xlim(-3, 112)
+    ax.set_xticks(range(0, 101, 20))
+    ax.set_xlabel("physical grasp success (%), Wilson 95 % interval")
+    ax.grid(axis="x", alpha=0.3)
+    ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=2, frameon=False)
+    return _save(fig, path)
+
+
+def plot_success_per_object(summaries: dict, path) -> Path:
+    """Heat map of the success rate per test object (rows) and detector (columns).
+
+    Parameters
+    ----------
+    summaries : dict
+        Detector name -> trial summary with ``per_object`` (object -> ``successes``, ``n``).
+    path : str or Path
+
+    Returns
+    -------
+    Path
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    names = list(summaries)
+    objects = sorted({o for s in summaries.values() for o in s.get("per_object", {})})
+    if not names or not objects:
+        raise ValueError("no per-object results to plot")
+    rate = np.full((len(objects), len(names)), np.nan)
+    text = [["" for _ in names] for _ in objects]
+    for j, name in enumerate(names):
+        for i, obj in enumerate(objects):
+            v = summaries[name].get("per_object", {}).get(obj)
+            if v and v["n"]:
+                rate[i, j] = v["successes"] / v["n"]
+                text[i][j] = f"{v['successes']}/{v['n']}"
+    longest = max(len(o) for o in objects)
+    fig, ax = plt.subplots(figsize=(1.5 + 0.08 * longest + 1.1 * len(names),
+                                    1.4 + 0.32 * len(objects)))
+    cmap = plt.get_cmap("viridis").with_extremes(bad="#dddddd")  # gray: no trial
+    im = ax.imshow(np.ma.masked_invalid(rate), cmap=cmap, vmin=0, vmax=1, aspect="auto")
+    for i in range(len(objects)):
+        for j in range(len(names)):
+            if text[i][j]:
+                ax.text(j, i, text[i][j], ha="center", va="center", fontsize=8,
+                        color="black" if rate[i, j] > 0.6 else "white")
+    ax.set_xticks(range(len(names)), names, rotation=30, ha="right")
+    ax.set_yticks(range(len(objects)), objects)
+    ax.tick_params(length=0)
+    ax.set_title("physical success per object (successes/trials)", fontsize=10)
+    fig.colorbar(im, ax=ax, fraction=0.05, pad=0.03, label="success rate")
+    return _save(fig, path)
+
+
+def plot_verdicts(summaries: dict, path) -> Path:
+    """The rectangle metric's verdict against the physical outcome, one 2x2 panel per detector.
+
+    Parameters
+    ----------
+    summaries : dict
+        Detector name -> trial summary with ``verdict_vs_outcome`` and ``metric_n``; detectors
+        without verdicts (unlabelled scenes) are left out.
+    path : str or Path
+
+    Returns
+    -------
+    Path
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    names = [n for n, s in summaries.items() if s.get("metric_n")]
+    if not names:
+        raise ValueError("no rectangle-metric verdicts to plot")
+    fig, axes = plt.subplots(1, len(names), figsize=(0.6 + 2.6 * len(names), 3.0),
+                             squeeze=False)
+    for ax, name in zip(axes[0], names, strict=True):
+        s = summaries[name]
+        t = s["verdict_vs_outcome"]
+        m = np.array([[t["metric_true"]["success"], t["metric_true"]["failure"]],
+                      [t["metric_false"]["success"], t["metric_false"]["failure"]]])
+        frac = m / max(1, m.sum())
+        ax.imshow(frac, cmap="Blues", vmin=0, vmax=1)
+        for i in range(2):
+            for j in range(2):
+                ax.text(j, i, f"{m[i, j]}\n{100 * frac[i, j]:.0f} %", ha="center",
+                        va="center", fontsize=9,
+                        color="white" if frac[i, j] > 0.55 else "black")
+        ax.set_xticks([0, 1], ["succeeded", "failed"])
+        ax.set_yticks([0, 1], ["correct", "wrong"])
+        ax.set_xlabel("physical outcome")
+        ax.tick_params(length=0)
+        agree = s.get("agreement")
+        ax.set_title(f"{name}\nagreement {100 * agree:.0f} %" if agree is not None else name,
+                     fontsize=10)
+    axes[0][0].set_ylabel("rectangle metric says")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def plot_paired_differences(comparisons: list[dict], path) -> Path:
+    """Forest plot of paired differences in success rate (A - B) with their intervals.
+
+    Parameters
+    ----------
+    comparisons : list of dict
+        From :func:`graspsim.compare.compare_pair`.
+    path : str or Path
+
+    Returns
+    -------
+    Path
+    """
+    plt = _pyplot()
+    if not comparisons:
+        raise ValueError("no comparisons to plot")
+    fig, ax = plt.subplots(figsize=(8, 1.2 + 0.6 * len(comparisons)))
+    labels = []
+    for i, c in enumerate(comparisons):
+        d = 100 * c["difference"]
+        lo, hi = (100 * v for v in c["difference_ci"])
+        color = {"a": "tab:green", "b": "tab:red"}.get(c["better"], "tab:gray")
+        ax.errorbar([d], [i], xerr=[[d - lo], [hi - d]], fmt="o", color=color, capsize=3)
+        labels.append(f"{c['a']['name']} - {c['b']['name']}")
+    ax.axvline(0, color="black", lw=0.8)
+    ax.set_yticks(range(len(comparisons)), labels)
+    ax.set_ylim(len(comparisons) - 0.5, -0.5)
+    ax.set_xlim(-100, 100)
+    ax.set_xticks(range(-100, 101, 25))
+    right = ax.twinx()  # the p-values as labels of a right-hand axis
+    right.set_ylim(ax.get_ylim())
+    right.set_yticks(range(len(comparisons)),
+                     [f"p = {c['mcnemar_p']:.2g}" for c in comparisons])
+    right.tick_params(length=0)
+    level = f"{100 * (1 - comparisons[0]['alpha']):g} %"
+    ax.set_xlabel(f"paired difference in success (percentage points), {level} interval "
+                  "(Newcombe); p: exact McNemar")
+    ax.grid(axis="x", alpha=0.3)
+    return _save(fig, path)
+
+
+def _picture(blocks: list, fn, args, path: Path, root: Path, alt: str) -> None:
+    """Draw one picture into the report; a failed picture is logged, never loses the report."""
+    try:
+        fn(*args, path)
+    except Exception as exc:
+        log.warning("%s failed: %s", path.name, exc)
+        return
+    blocks.append(("img", str(path.relative_to(root)), alt))
+
+
+def _paired_section(root: Path, names: list[str], stages: dict, pics: Path) -> list[tuple]:
+    """DLSR against each baseline on the same trial scenes (see :mod:`graspsim.compare`)."""
+    from .compare import compare_pair
+
+    if not stages.get("trials/dlsr"):
+        return []
+    comparisons, errors = [], []
+    for name in names[1:]:
+        if not stages.get(f"trials/{name}"):
+            continue
+        try:
+            comparisons.append(compare_pair(root / "trials" / "dlsr", root / "trials" / name,
+                                            names=("dlsr", name)))
+        except (ValueError, FileNotFoundError) as exc:
+            errors.append(f"dlsr against {name}: not compared ({exc}).")
+    if not comparisons and not errors:
+        return []
+    blocks: list[tuple] = [("h2", "DLSR against each baseline, scene by scene")]
+    blocks.append(("p", "Trial i of every detector ran on the same scene, so the outcomes pair "
+                        "up: the table counts the trials both detectors won, those only one "
+                        "won, and those both lost. The difference in success rate has "
+                        "Newcombe's 95 % interval for paired proportions (method 10, 1998); "
+                        "p is the exact McNemar test (two-sided binomial test of the trials "
+                        "only one detector won). The verdict is the test's at the 5 % level."))
+    rows = []
+    for c in comparisons:
+        k = c["counts"]
+        lo, hi = c["difference_ci"]
+        verdict = {"a": "DLSR better", "b": f"{c['b']['name']} better"}.get(
+            c["better"], "not separated")
+        rows.append([c["b"]["name"], c["n"], k["both"], k["only_a"], k["only_b"], k["neither"],
+                     f"{100 * c['difference']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]",
+                     f"{c['mcnemar_p']:.2g}", verdict])
+    if rows:
+        blocks.append(("table", ["baseline", "paired trials", "both succeeded", "only DLSR",
+                                 "only baseline", "neither", "DLSR - baseline, points [95 % CI]",
+                                 "exact McNemar p", "verdict (5 %)"], rows))
+    blocks += [("p", c["verdict"]) for c in comparisons]
+    blocks += [("p", e) for e in errors]
+    if comparisons:
+        (root / "comparisons.json").write_text(
+            json.dumps({"alpha": comparisons[0]["alpha"], "comparisons": comparisons},
+                       indent=2) + "\n")
+        _picture(blocks, plot_paired_differences, (comparisons,), pics / "paired_differences.png",
+                 root, "DLSR minus each baseline: paired difference in success with its 95 % "
+                       "interval (green: DLSR better, red: baseline better, gray: not separated)")
+    return blocks
+
+
 def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
     """Write ``report.md`` and ``report.html`` in ``root`` from the stage results on disk."""
     root = Path(root)
@@ -214,12 +485,22 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
     blocks.append(("table", ["detector", "successes", "success rate", "95 % CI (Wilson)",
                              "on graspable objects", "rectangle metric says correct",
                              "metric agrees with physics"], rows))
+    summaries = {n: stages[f"trials/{n}"] for n in names if stages.get(f"trials/{n}")}
+    if summaries:
+        _picture(blocks, plot_success_rates, (summaries,), pics / "success_rates.png", root,
+                 "physical success per detector with Wilson 95 % intervals, on all test "
+                 "objects and on the graspable ones")
     blocks.append(("p", "Rectangle-metric verdict against physical outcome, per detector "
                         "(how often the benchmark metric is wrong about a real grasp): the "
                         "metric-correct grasps that failed and the metric-wrong grasps that "
                         "succeeded are its errors."))
     blocks.append(("table", ["detector", "metric correct & succeeded", "metric correct & failed",
                              "metric wrong & succeeded", "metric wrong & failed"], tables))
+    if any(s.get("metric_n") for s in summaries.values()):
+        _picture(blocks, plot_verdicts, (summaries,), pics / "verdict_vs_outcome.png", root,
+                 "rectangle-metric verdict against physical outcome per detector (the "
+                 "diagonal is where the metric is right)")
+    blocks += _paired_section(root, names, stages, pics)
 
     per_obj: dict[str, dict[str, str]] = {}
     for name in names:
@@ -230,6 +511,8 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
         blocks.append(("h2", "Success per object"))
         blocks.append(("table", ["object", *names],
                        [[o, *[per_obj[o].get(n, "") for n in names]] for o in sorted(per_obj)]))
+        _picture(blocks, plot_success_per_object, (summaries,), pics / "success_per_object.png",
+                 root, "physical success per test object and detector")
 
     blocks.append(("h2", "Pictures"))
     try:

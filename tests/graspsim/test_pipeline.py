@@ -49,6 +49,8 @@ def test_run_writes_every_stage_and_the_report(tiny_run):
     assert (model["config"]["fit_grid"], model["config"]["hard_negatives"]) == (0.05, 2)
     md = report.read_text()
     assert "Physical grasp success" in md and "| dlsr |" in md and "| mask-pca |" in md
+    assert "DLSR against each baseline, scene by scene" in md and "| mask-pca | 3 |" in md
+    assert (out / "pictures" / "success_rates.png").exists()
     html = (out / "report.html").read_text()
     assert html.startswith("<!DOCTYPE html>") and "data:image/png;base64," in html
     assert "<img" in html and 'src="pictures/' not in html  # self-contained
@@ -141,3 +143,66 @@ def test_report_html_renders_in_headless_chromium(tiny_run, tmp_path):
 
     img = np.asarray(Image.open(shot).convert("L"), dtype=float)
     assert img.std() > 10  # text, tables and pictures, not a blank page
+
+
+def _synthetic_trials(root, name, success_of):
+    """A trial folder as run_trials writes it, 40 trials on 4 objects; returns its summary."""
+    from graspsim.trials import summarize
+
+    folder = root / "trials" / name
+    folder.mkdir(parents=True)
+    (folder / "config.json").write_text(json.dumps({
+        "detector": name, "objects": "test", "seed": 7,
+        "config": {"n_candidates": 8, "n_objects": 1, "label_with_clean_depth": False}}))
+    objects = ["mug", "bowl", "box_long_name", "plate"]
+    records = []
+    for i in range(40):
+        ok = success_of(i)
+        records.append({"index": i, "seed": 7, "object": [objects[i % 4]],
+                        "graspable": objects[i % 4] != "plate", "success": ok,
+                        "reason": None if ok else "slipped", "rectangle": None,
+                        "metric": i % 3 == 0, "seconds": 0.1})
+    (folder / "trials.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    return summarize(records) | {"seconds": 4.0}
+
+
+def test_report_compares_dlsr_with_each_baseline_and_draws(tmp_path):
+    from graspsim.report import write_report
+
+    config = pipeline.load_config(**{**TINY, "baselines": ["mask-pca", "random"]})
+    stages = {
+        "trials/dlsr": _synthetic_trials(tmp_path, "dlsr", lambda i: i % 4 != 0),
+        "trials/mask-pca": _synthetic_trials(tmp_path, "mask-pca", lambda i: i % 4 == 1),
+        "trials/random": _synthetic_trials(tmp_path, "random", lambda i: False),
+    }
+    md = write_report(tmp_path, config, stages).read_text()
+    assert "## DLSR against each baseline, scene by scene" in md
+    # dlsr wins trials i % 4 in {1, 2, 3}, mask-pca only i % 4 == 1: both 10, only DLSR 20
+    row = next(ln for ln in md.splitlines() if ln.startswith("| mask-pca | 40 |"))
+    assert row.startswith("| mask-pca | 40 | 10 | 20 | 0 | 10 | +50.0 [")
+    assert row.endswith("| DLSR better |")
+    assert "dlsr is better than mask-pca at the 5 % level" in md
+    assert "| random | 40 | 0 | 30 | 0 | 10 |" in md
+    pictures = ["success_rates.png", "success_per_object.png", "verdict_vs_outcome.png",
+                "paired_differences.png"]
+    for pic in pictures:
+        assert (tmp_path / "pictures" / pic).stat().st_size > 1000
+        assert f"](pictures/{pic})" in md
+    html = (tmp_path / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == len(pictures)
+    saved = json.loads((tmp_path / "comparisons.json").read_text())["comparisons"]
+    assert [(c["a"]["name"], c["b"]["name"]) for c in saved] == [("dlsr", "mask-pca"),
+                                                                ("dlsr", "random")]
+
+
+def test_report_says_why_a_pair_was_not_compared(tmp_path):
+    from graspsim.report import write_report
+
+    config = pipeline.load_config(**{**TINY, "baselines": ["mask-pca"]})
+    stages = {"trials/dlsr": _synthetic_trials(tmp_path, "dlsr", lambda i: i % 2 == 0),
+              "trials/mask-pca": _synthetic_trials(tmp_path, "mask-pca", lambda i: i % 3 == 0)}
+    cfg = tmp_path / "trials" / "mask-pca" / "config.json"
+    cfg.write_text(cfg.read_text().replace('"seed": 7', '"seed": 8'))
+    md = write_report(tmp_path, config, stages).read_text()
+    assert "dlsr against mask-pca: not compared" in md and "seed 7 vs 8" in md
+    assert (tmp_path / "pictures" / "success_rates.png").exists()

@@ -1,0 +1,41 @@
+"""``graspsim compare``: paired comparison of detectors run on the same scenes."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "compare",
+        help="paired comparison of trial (or score) folders run on the same scenes",
+        description="Compare every pair of the given folders scene by scene: both / only A / "
+                    "only B / neither, the difference in success rate with Newcombe's 95 % "
+                    "interval for paired proportions, the exact McNemar p-value and a verdict. "
+                    "Trial folders must share seed, objects and objects per scene; score "
+                    "folders the dataset fingerprint. Scenes present in only one folder are "
+                    "left out (and counted).",
+    )
+    p.add_argument("folders", nargs="+", metavar="DIR",
+                   help="graspsim trials (or graspsim score) output folders, at least two")
+    p.add_argument("--out", default=None, metavar="FILE",
+                   help="also write the comparisons as JSON to FILE")
+    p.add_argument("--alpha", type=float, default=0.05,
+                   help="test level; the interval has level 1 - alpha (default 0.05)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from graspsim.compare import compare_folders, comparison_text
+
+    comparisons = compare_folders(args.folders, alpha=args.alpha)
+    print("\n\n".join(comparison_text(c) for c in comparisons))
+    if args.out is not None:
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"alpha": args.alpha, "comparisons": comparisons},
+                                  indent=2) + "\n")
+        print(f"written: {out}")
+    return 0

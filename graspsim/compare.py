@@ -1,0 +1,437 @@
+"""Paired comparisons of two detectors run on the same scenes.
+
+Trial ``i`` of a ``graspsim trials`` run with seed ``s`` depends only on ``(s, i)`` (see
+:mod:`graspsim.trials`), and ``graspsim score`` runs every image of a dataset in that image's
+rebuilt scene. Two detectors run with the same seed and objects (or scored on the same dataset)
+therefore meet exactly the same scenes, and their outcomes are **paired**: the question is not
+whether two Wilson intervals overlap, but on how many scenes one detector succeeded where the
+other failed. For each pair of folders this module gives
+
+* the 2x2 table of paired outcomes: both succeeded, only A, only B, neither;
+* the difference in success rate, ``(only A - only B) / n``, with Newcombe's score interval
+  for the difference of paired proportions (method 10 of R. G. Newcombe, *Improved confidence
+  intervals for the difference between binomial proportions based on paired data*, Statistics
+  in Medicine 17:2635-2650, 1998; the "square-and-add" interval of Fagerland, Lydersen and
+  Laake, *Statistical Analysis of Contingency Tables*, 2017, ch. 8): the Wilson intervals of the
+  two success rates combined with the estimated correlation between them;
+* the exact (conditional) McNemar p-value: under "no difference" the discordant scenes split
+  between A and B like fair coin flips, so ``p`` is the two-sided binomial test of
+  ``only A`` successes in ``only A + only B`` trials with probability 1/2 (McNemar,
+  Psychometrika 12:153-157, 1947; the ``exact=True`` test of statsmodels'
+  ``statsmodels.stats.contingency_tables.mcnemar``, which doubles the smaller binomial tail);
+* a verdict: which detector is better at the 5 % level (by the McNemar test), or that the two
+  are not separated. The interval is an approximation and the exact test is conservative, so
+  with few discordant scenes they can disagree (an interval just excluding 0 with p above 5 %);
+  the verdict follows the test and then says so. (Fagerland, Lydersen and Laake, BMC Medical
+  Research Methodology 13:91, 2013, find the exact conditional test conservative and prefer
+  its mid-p version; the exact test is kept here because a verdict should not overstate.)
+
+Folders
+-------
+Trial folders (``config.json`` with ``seed``, ``objects`` and ``config.n_objects``, and
+``trials.jsonl`` records keyed by ``index`` with ``object`` and ``success``) pair when seed,
+objects and objects per scene agree and every shared index holds the same objects. Score
+folders (``config.json`` with ``dataset_fingerprint``, ``scores.jsonl`` records keyed by
+``image`` with ``success``) pair when the fingerprints agree. Anything else is refused with a
+one-line ``ValueError`` naming both folders and what differs.
+
+Folders of different lengths (a 100-trial and a 200-trial run of the same seed, or a run still
+going) are paired on the trials or images present in both: trial ``i`` is the same scene in
+both, so the shared part is a valid paired sample. How many were left out of each folder is
+recorded (``unpaired``) and logged; folders that share nothing are refused.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "paired_counts",
+    "mcnemar_exact",
+    "paired_difference_ci",
+    "compare_outcomes",
+    "load_folder",
+    "compare_pair",
+    "compare_folders",
+    "comparison_text",
+]
+
+CI_METHOD = "Newcombe (1998) method 10: Wilson score intervals combined for paired data"
+TEST_METHOD = "exact McNemar: two-sided binomial test of the discordant pairs, p = 1/2"
+
+
+def paired_counts(a, b) -> dict:
+    """The 2x2 table of two paired sequences of outcomes.
+
+    Parameters
+    ----------
+    a, b : array-like of bool, shape (n,)
+        Success of detector A and of detector B on the same ``n`` scenes, in the same order.
+
+    Returns
+    -------
+    dict
+        ``both``, ``only_a``, ``only_b``, ``neither`` (ints summing to ``n``).
+    """
+    a = np.asarray(a)
+    b = np.asarray(b)
+    if a.ndim != 1 or a.shape != b.shape:
+        raise ValueError(f"paired outcomes must be two 1-D sequences of the same length, "
+                         f"got shapes {a.shape} and {b.shape}")
+    for name, x in (("a", a), ("b", b)):
+        if x.dtype != bool and not np.isin(x, (0, 1)).all():
+            raise ValueError(f"outcomes {name} must be booleans or 0/1")
+    a = a.astype(bool)
+    b = b.astype(bool)
+    return {"both": int(np.sum(a & b)), "only_a": int(np.sum(a & ~b)),
+            "only_b": int(np.sum(~a & b)), "neither": int(np.sum(~a & ~b))}
+
+
+def _check_count(name, v) -> int:
+    if isinstance(v, bool) or not float(v).is_integer() or v < 0:
+        raise ValueError(f"{name} must be a count (an integer >= 0), got {v!r}")
+    return int(v)
+
+
+def mcnemar_exact(only_a: int, only_b: int) -> float:
+    """Exact two-sided McNemar p-value from the discordant counts.
+
+    Parameters
+    ----------
+    only_a, only_b : int
+        Scenes where only A succeeded, and where only B succeeded.
+
+    Returns
+    -------
+    float
+        ``min(1, 2 P(X <= min(only_a, only_b)))`` for ``X ~ Binomial(only_a + only_b, 1/2)``;
+        1.0 when there is no discordant pair.
+    """
+    from scipy.stats import binomtest
+
+    only_a = _check_count("only_a", only_a)
+    only_b = _check_count("only_b", only_b)
+    m = only_a + only_b
+    if m == 0:
+        return 1.0
+    # For p = 1/2 the distribution is symmetric, so scipy's two-sided p (the probability of
+    # every outcome no likelier than the one observed) is the doubled smaller tail.
+    return float(min(1.0, binomtest(min(only_a, only_b), m, 0.5).pvalue))
+
+
+def paired_difference_ci(both: int, only_a: int, only_b: int, neither: int,
+                         alpha: float = 0.05) -> tuple[float, float]:
+    """Newcombe's interval for the difference of two paired success rates (method 10).
+
+    Parameters
+    ----------
+    both, only_a, only_b, neither : int
+        The paired 2x2 table (see :func:`paired_counts`).
+    alpha : float
+        1 - confidence level (0.05: a 95 % interval).
+
+    Returns
+    -------
+    (lower, upper) : tuple of float
+        Bounds for ``p_A - p_B`` (fractions in [-1, 1]); ``(nan, nan)`` when the table is empty.
+
+    Notes
+    -----
+    With ``p_A = (both + only_a) / n``, ``p_B = (both + only_b) / n`` and their Wilson intervals
+    ``[l_A, u_A]``, ``[l_B, u_B]``, the bounds are
+    ``p_A - p_B - sqrt(dA^2 - 2 phi dA eB + eB^2)`` and ``p_A - p_B + sqrt(dB^2 - 2 phi dB eA
+    + eA^2)``, where ``dX = p_X - l_X`` and ``eX = u_X - p_X``. ``phi`` is the phi coefficient
+    of the table with Newcombe's continuity correction of its numerator
+    ``both * neither - only_a * only_b`` (reduced by n/2 when larger than n/2, set to 0 between
+    0 and n/2), and 0 when a margin is empty.
+    """
+    from scipy.stats import norm
+
+    from .trials import wilson_interval
+
+    both, only_a, only_b, neither = (_check_count(k, v) for k, v in (
+        ("both", both), ("only_a", only_a), ("only_b", only_b), ("neither", neither)))
+    if not 0 < alpha < 1:
+        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    n = both + only_a + only_b + neither
+    if n == 0:
+        return (float("nan"), float("nan"))
+    z = float(norm.ppf(1 - alpha / 2))
+    ka, kb = both + only_a, both + only_b
+    pa, pb = ka / n, kb / n
+    la, ua = wilson_interval(ka, n, z)
+    lb, ub = wilson_interval(kb, n, z)
+    margins = (ka, n - ka, kb, n - kb)
+    phi = 0.0
+    if min(margins) > 0:
+        num = both * neither - only_a * only_b
+        if num > n / 2:
+            num -= n / 2
+        elif num >= 0:
+            num = 0
+        phi = num / math.sqrt(math.prod(float(m) for m in margins))
+    d = pa - pb
+    lower = d - math.sqrt(max(0.0, (pa - la) ** 2 - 2 * phi * (pa - la) * (ub - pb)
+                                   + (ub - pb) ** 2))
+    upper = d + math.sqrt(max(0.0, (pb - lb) ** 2 - 2 * phi * (pb - lb) * (ua - pa)
+                                   + (ua - pa) ** 2))
+    return (max(-1.0, lower), min(1.0, upper))
+
+
+def _level(alpha: float) -> str:
+    return f"{100 * alpha:g} %"
+
+
+def compare_outcomes(a, b, names=("A", "B"), alpha: float = 0.05, unit: str = "trials") -> dict:
+    """Paired comparison of two outcome sequences on the same scenes.
+
+    Parameters
+    ----------
+    a, b : array-like of bool, shape (n,)
+        Successes of the two detectors, scene by scene.
+    names : (str, str)
+        How the verdict names the detectors.
+    alpha : float
+        Test level and 1 - interval level.
+    unit : str
+        What a scene is called in the verdict (``"trials"``, ``"images"``).
+
+    Returns
+    -------
+    dict
+        ``n``, ``counts`` (:func:`paired_counts`), ``success_a``/``success_b`` (counts),
+        ``difference`` (``p_A - p_B``, a fraction), ``difference_ci`` (``[lower, upper]``,
+        level ``1 - alpha``), ``ci_method``, ``mcnemar_p``, ``test``, ``alpha``, ``better``
+        (``"a"``, ``"b"`` or None) and ``verdict`` (a sentence).
+    """
+    counts = paired_counts(a, b)
+    n = sum(counts.values())
+    if n == 0:
+        raise ValueError("no paired outcomes to compare")
+    na, nb = names
+    x, y = counts["only_a"], counts["only_b"]
+    p = mcnemar_exact(x, y)
+    lo, hi = paired_difference_ci(**counts, alpha=alpha)
+    better = None
+    if p < alpha:
+        better = "a" if x > y else "b"
+        win, lose = (na, nb) if better == "a" else (nb, na)
+        wx, lx = (x, y) if better == "a" else (y, x)
+        verdict = (f"{win} is better than {lose} at the {_level(alpha)} level (exact McNemar "
+                   f"p = {p:.2g}): of the {n} paired {unit}, {win} alone succeeded on {wx} and "
+                   f"{lose} alone on {lx}.")
+    else:
+        verdict = (f"{na} and {nb} are not separated at the {_level(alpha)} level (exact "
+                   f"McNemar p = {p:.2g}): of the {n} paired {unit}, {na} alone succeeded on "
+                   f"{x} and {nb} alone on {y}.")
+    if (lo > 0 or hi < 0) != (better is not None):
+        verdict += (f" (The {100 * (1 - alpha):g} % interval, an approximation, "
+                    f"{'excludes' if lo > 0 or hi < 0 else 'includes'} 0 here: with few "
+                    f"discordant {unit} the exact test is the more conservative of the two, "
+                    "and the verdict follows the test.)")
+    return {
+        "n": n, "counts": counts,
+        "success_a": counts["both"] + x, "success_b": counts["both"] + y,
+        "difference": (x - y) / n, "difference_ci": [lo, hi], "ci_method": CI_METHOD,
+        "mcnemar_p": p, "test": TEST_METHOD, "alpha": alpha, "better": better,
+        "verdict": verdict,
+    }
+
+
+def load_folder(folder) -> dict:
+    """A trial or score folder's configuration and outcome records.
+
+    Parameters
+    ----------
+    folder : str or Path
+        A ``graspsim trials`` folder (``config.json``, ``trials.jsonl``) or a ``graspsim score``
+        folder (``config.json`` with ``dataset_fingerprint``, ``scores.jsonl``).
+
+    Returns
+    -------
+    dict
+        ``folder`` (Path), ``kind`` (``"trials"`` or ``"scores"``), ``config`` (dict), ``name``
+        (the detector recorded in the configuration, else the folder's name), ``file`` (the
+        JSONL path) and ``records`` (dict: trial index (int) or image id (str) -> record).
+    """
+    from dlsr.records import read_jsonl
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder}: no such folder")
+    cfg_path = folder / "config.json"
+    if not cfg_path.exists():
+        raise FileNotFoundError(f"{cfg_path} is missing: {folder} is not a trials or score folder")
+    try:
+        config = json.loads(cfg_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{cfg_path}: not valid JSON ({exc})") from None
+    if not isinstance(config, dict):
+        raise ValueError(f"{cfg_path}: expected a JSON object")
+    if "dataset_fingerprint" in config:
+        kind, jsonl, key = "scores", folder / "scores.jsonl", "image"
+    else:
+        kind, jsonl, key = "trials", folder / "trials.jsonl", "index"
+    if not jsonl.exists():
+        raise FileNotFoundError(f"{jsonl} is missing: {folder} holds no {kind}")
+    records: dict = {}
+    for number, rec in enumerate(read_jsonl(jsonl), start=1):
+        if key not in rec or "success" not in rec:
+            raise ValueError(f"{jsonl}: record {number} has no '{key}' or no 'success'")
+        if rec["success"] not in (True, False, 0, 1):
+            raise ValueError(f"{jsonl}: record {number} has success {rec['success']!r}, "
+                             "expected true or false")
+        try:
+            k = int(rec[key]) if kind == "trials" else str(rec[key])
+        except (TypeError, ValueError):
+            raise ValueError(f"{jsonl}: record {number} has {key} {rec[key]!r}") from None
+        if k in records:
+            if bool(records[k]["success"]) != bool(rec["success"]):
+                raise ValueError(f"{jsonl}: {key} {k!r} appears twice with different outcomes")
+            continue
+        records[k] = rec
+    if not records:
+        raise ValueError(f"{jsonl}: no records")
+    name = str(config.get("detector") or config.get("name") or folder.name)
+    return {"folder": folder, "kind": kind, "config": config, "name": name, "file": jsonl,
+            "records": records}
+
+
+def _scene_differences(a: dict, b: dict) -> list[str]:
+    """What makes two loaded folders' scenes differ (empty: they pair)."""
+    if a["kind"] != b["kind"]:
+        return [f"a {a['kind']} folder against a {b['kind']} folder"]
+    ca, cb = a["config"], b["config"]
+    if a["kind"] == "scores":
+        fa, fb = ca.get("dataset_fingerprint"), cb.get("dataset_fingerprint")
+        return [] if fa == fb else [f"dataset_fingerprint {fa} vs {fb}"]
+    out = []
+    for key in ("seed", "objects"):
+        if key not in ca or key not in cb:
+            out.append(f"no '{key}' in config.json of "
+                       f"{a['folder'] if key not in ca else b['folder']}")
+        elif ca[key] != cb[key]:
+            out.append(f"{key} {json.dumps(ca[key])} vs {json.dumps(cb[key])}")
+    na = (ca.get("config") or {}).get("n_objects", 1)
+    nb = (cb.get("config") or {}).get("n_objects", 1)
+    if na != nb:
+        out.append(f"n_objects {na} vs {nb}")
+    if not out:
+        for i in sorted(set(a["records"]) & set(b["records"])):
+            oa, ob = a["records"][i].get("object"), b["records"][i].get("object")
+            if oa != ob:
+                out.append(f"trial {i} has objects {oa} vs {ob}")
+                break
+    return out
+
+
+def _labels(folders: list[dict]) -> list[str]:
+    names = [f["name"] for f in folders]
+    return [str(f["folder"]) if names.count(f["name"]) > 1 else f["name"] for f in folders]
+
+
+def _pair(a: dict, b: dict, names, alpha: float) -> dict:
+    diff = _scene_differences(a, b)
+    if diff:
+        raise ValueError(f"{a['folder']} and {b['folder']} did not run on the same scenes: "
+                         + "; ".join(diff))
+    ka, kb = set(a["records"]), set(b["records"])
+    keys = sorted(ka & kb)
+    unit = "trials" if a["kind"] == "trials" else "images"
+    if not keys:
+        raise ValueError(f"{a['folder']} and {b['folder']} share no {unit}")
+    unpaired = {"a": len(ka - kb), "b": len(kb - ka)}
+    if unpaired["a"] or unpaired["b"]:
+        log.warning("%s vs %s: %d %s paired; %d only in %s and %d only in %s left out",
+                    names[0], names[1], len(keys), unit, unpaired["a"], a["folder"],
+                    unpaired["b"], b["folder"])
+    sa = [bool(a["records"][k]["success"]) for k in keys]
+    sb = [bool(b["records"][k]["success"]) for k in keys]
+    res = compare_outcomes(sa, sb, names=names, alpha=alpha, unit=unit)
+    from .trials import wilson_interval
+
+    side = {}
+    for tag, f, k, name in (("a", a, res["success_a"], names[0]),
+                            ("b", b, res["success_b"], names[1])):
+        side[tag] = {"folder": str(f["folder"]), "name": name, "successes": k,
+                     "success_rate": k / res["n"],
+                     "success_ci95": list(wilson_interval(k, res["n"]))}
+    return {"kind": a["kind"], "unit": unit, **side, "unpaired": unpaired, **res}
+
+
+def compare_pair(folder_a, folder_b, names=None, alpha: float = 0.05) -> dict:
+    """Compare two trial folders (or two score folders) scene by scene.
+
+    Parameters
+    ----------
+    folder_a, folder_b : str or Path
+    names : (str, str) or None
+        Labels of the two detectors (default: the detectors their ``config.json`` records).
+    alpha : float
+        Test level and 1 - interval level (0.05: 5 % test, 95 % interval).
+
+    Returns
+    -------
+    dict
+        ``a`` and ``b`` (folder, name, successes, success rate and its Wilson interval on the
+        paired scenes), ``kind``, ``unit``, ``unpaired`` (scenes left out of each folder) and
+        the fields of :func:`compare_outcomes`.
+    """
+    fa, fb = load_folder(folder_a), load_folder(folder_b)
+    return _pair(fa, fb, tuple(names) if names is not None else tuple(_labels([fa, fb])), alpha)
+
+
+def compare_folders(folders, alpha: float = 0.05) -> list[dict]:
+    """Every pair of the given folders compared (see :func:`compare_pair`).
+
+    Parameters
+    ----------
+    folders : sequence of str or Path
+        At least two trial folders, or at least two score folders.
+    alpha : float
+
+    Returns
+    -------
+    list of dict
+        One comparison per pair, in the order of :func:`itertools.combinations`.
+    """
+    folders = list(folders)
+    if len(folders) < 2:
+        raise ValueError(f"compare needs at least two folders, got {len(folders)}")
+    loaded = [load_folder(f) for f in folders]
+    labels = _labels(loaded)
+    return [_pair(loaded[i], loaded[j], (labels[i], labels[j]), alpha)
+            for i, j in itertools.combinations(range(len(loaded)), 2)]
+
+
+def comparison_text(c: dict) -> str:
+    """A comparison (from :func:`compare_pair`) as a few lines of plain text."""
+    na, nb = c["a"]["name"], c["b"]["name"]
+    n = c["n"]
+    k = c["counts"]
+    un = c["unpaired"]
+    left = ("" if not (un["a"] or un["b"]) else
+            f"; left out: {un['a']} only in {na}'s folder, {un['b']} only in {nb}'s")
+    w = max(len(na), len(nb)) + 8
+    lo, hi = c["difference_ci"]
+    level = f"{100 * (1 - c['alpha']):g} %"
+    return "\n".join([
+        f"{na} vs {nb}: {n} paired {c['unit']}{left}",
+        f"  {'':{w}} {nb + ' ok':>{len(nb) + 5}} {nb + ' failed':>{len(nb) + 9}}",
+        f"  {na + ' ok':{w}} {k['both']:>{len(nb) + 5}} {k['only_a']:>{len(nb) + 9}}",
+        f"  {na + ' failed':{w}} {k['only_b']:>{len(nb) + 5}} {k['neither']:>{len(nb) + 9}}",
+        f"  success: {na} {c['success_a']}/{n} = {100 * c['success_a'] / n:.1f} %, "
+        f"{nb} {c['success_b']}/{n} = {100 * c['success_b'] / n:.1f} %",
+        f"  difference {na} - {nb}: {100 * c['difference']:+.1f} points, {level} interval "
+        f"[{100 * lo:+.1f}, {100 * hi:+.1f}] (Newcombe 1998, method 10)",
+        f"  exact McNemar p = {c['mcnemar_p']:.3g}",
+        f"  {c['verdict']}",
+    ])
