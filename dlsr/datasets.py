@@ -26,6 +26,7 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from .metrics import rectangle_metric_many
+from .records import CorruptFileError, check_magic, file_errors
 from .rectangles import GraspRectangle, array_to_rects, rects_to_array
 
 __all__ = [
@@ -53,6 +54,9 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
+
+# What Pillow raises on unreadable images beyond the common parser errors.
+_IMAGE_ERRORS = (UnidentifiedImageError, Image.DecompressionBombError)
 
 CORNELL_WIDTH = 640
 """Row length used by the Cornell point-cloud pixel index (``index = row * 640 + col``)."""
@@ -103,11 +107,9 @@ def read_rgb(path: Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"image file not found: {path}")
-    try:
+    with file_errors(path, "cannot read image", _IMAGE_ERRORS):
         with Image.open(path) as im:
             return np.array(im.convert("RGB"), dtype=np.uint8)
-    except (UnidentifiedImageError, OSError, ValueError) as exc:
-        raise ValueError(f"cannot read image {path}: {exc}") from exc
 
 
 def read_gray(path: Path) -> np.ndarray:
@@ -115,11 +117,9 @@ def read_gray(path: Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"image file not found: {path}")
-    try:
+    with file_errors(path, "cannot read image", _IMAGE_ERRORS):
         with Image.open(path) as im:
             return np.array(im.convert("L"))
-    except (UnidentifiedImageError, OSError, ValueError) as exc:
-        raise ValueError(f"cannot read image {path}: {exc}") from exc
 
 
 def read_depth_image(path: Path) -> np.ndarray:
@@ -128,16 +128,21 @@ def read_depth_image(path: Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"depth file not found: {path}")
-    try:
+    with file_errors(path, "cannot read depth image", _IMAGE_ERRORS):
+        if path.stat().st_size == 0:
+            raise CorruptFileError(f"cannot read depth image {path}: empty file")
         if path.suffix == ".npy":
-            arr = np.load(path, allow_pickle=False)
+            with open(path, "rb") as fh:
+                check_magic(fh, path, "cannot read depth image", (b"\x93NUMPY",),
+                            "a .npy array")
+                arr = np.load(fh, allow_pickle=False)
         else:
             with Image.open(path) as im:
                 arr = np.array(im)
-    except (UnidentifiedImageError, OSError, ValueError) as exc:
-        raise ValueError(f"cannot read depth image {path}: {exc}") from exc
     if arr.ndim != 2:
         raise ValueError(f"depth image {path} must have one channel, got shape {arr.shape}")
+    if not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
+        raise ValueError(f"depth image {path} must hold numbers, got dtype {arr.dtype}")
     return arr.astype(np.float32)
 
 
@@ -177,7 +182,7 @@ def read_pcd_depth(path, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray
     if not path.is_file():
         raise FileNotFoundError(f"point cloud not found: {path}")
     header: dict[str, list[str]] = {}
-    with open(path) as fh:
+    with file_errors(path, "point cloud"), open(path, encoding="utf-8") as fh:
         n_header = 0
         for line in fh:
             n_header += 1
@@ -189,7 +194,7 @@ def read_pcd_depth(path, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray
             if key.upper() == "DATA":
                 break
         else:
-            raise ValueError(f"point cloud {path}: no DATA line in the PCD header")
+            raise CorruptFileError(f"point cloud {path}: no DATA line in the PCD header")
     if header["DATA"] != ["ascii"]:
         raise ValueError(
             f"point cloud {path}: only 'DATA ascii' is supported, got {header['DATA']}"
@@ -197,13 +202,14 @@ def read_pcd_depth(path, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray
     fields = header.get("FIELDS")
     if not fields or not {"x", "y", "z", "index"} <= set(fields):
         raise ValueError(f"point cloud {path}: FIELDS must include x y z index, got {fields}")
-    try:
-        data = np.loadtxt(path, skiprows=n_header, ndmin=2, dtype=np.float64)
-    except ValueError as exc:
-        raise ValueError(f"point cloud {path}: malformed data: {exc}") from exc
+    with file_errors(path, "malformed point cloud data in"):
+        data = np.loadtxt(path, skiprows=n_header, ndmin=2, dtype=np.float64, encoding="utf-8")
     if data.size and data.shape[1] != len(fields):
         raise ValueError(f"point cloud {path}: {data.shape[1]} columns, FIELDS has {len(fields)}")
-    n_points = int(header.get("POINTS", [len(data)])[0])
+    points = header.get("POINTS") or [str(len(data))]
+    if not points[0].isdigit():
+        raise ValueError(f"point cloud {path}: POINTS must be a count, got {points}")
+    n_points = int(points[0])
     if len(data) != n_points:
         raise ValueError(f"point cloud {path}: header says {n_points} points, found {len(data)}")
     h, w = shape
@@ -241,7 +247,7 @@ def read_cornell_rectangles(path) -> list[GraspRectangle]:
     if not path.is_file():
         raise FileNotFoundError(f"rectangle file not found: {path}")
     corners, lines = [], []
-    with open(path) as fh:
+    with file_errors(path, "rectangle file"), open(path, encoding="utf-8") as fh:
         for lineno, line in enumerate(fh, start=1):
             s = line.strip()
             if not s:
@@ -252,7 +258,8 @@ def read_cornell_rectangles(path) -> list[GraspRectangle]:
                     raise ValueError
                 corners.append((float(parts[0]), float(parts[1])))
             except ValueError:
-                raise ValueError(f"{path}:{lineno}: expected 'x y', got {s!r}") from None
+                raise CorruptFileError(f"{path}:{lineno}: expected 'x y', got {s[:60]!r}") \
+                    from None
             lines.append(lineno)
     if len(corners) % 4:
         raise ValueError(
@@ -297,19 +304,19 @@ def read_mapping(path) -> dict[str, str]:
         raise FileNotFoundError(f"mapping file not found: {path}")
     mapping: dict[str, str] = {}
     first_line: dict[str, int] = {}
-    with open(path) as fh:
+    with file_errors(path, "mapping file"), open(path, encoding="utf-8") as fh:
         for lineno, line in enumerate(fh, start=1):
             s = line.strip()
             if not s or s.startswith("#"):
                 continue
             parts = s.split()
             if len(parts) < 2:
-                raise ValueError(
-                    f"{path}:{lineno}: expected 'image_number object_id ...', got {s!r}"
+                raise CorruptFileError(
+                    f"{path}:{lineno}: expected 'image_number object_id ...', got {s[:60]!r}"
                 )
             image_id, object_id = _norm_image_id(parts[0]), parts[1]
             if image_id in mapping and mapping[image_id] != object_id:
-                raise ValueError(
+                raise CorruptFileError(
                     f"{path}:{lineno}: image {image_id} has object id {object_id!r}, but line "
                     f"{first_line[image_id]} gave {mapping[image_id]!r}"
                 )
@@ -600,7 +607,7 @@ def read_jacquard_grasps(path) -> list[GraspRectangle]:
     if not path.is_file():
         raise FileNotFoundError(f"grasp file not found: {path}")
     rects = []
-    with open(path) as fh:
+    with file_errors(path, "grasp file"), open(path, encoding="utf-8") as fh:
         for lineno, line in enumerate(fh, start=1):
             s = line.strip()
             if not s:
@@ -611,8 +618,9 @@ def read_jacquard_grasps(path) -> list[GraspRectangle]:
                     raise ValueError
                 x, y, t, w, h = (float(p) for p in parts)
             except ValueError:
-                raise ValueError(
-                    f"{path}:{lineno}: expected 'x;y;theta_deg;opening;jaw_size', got {s!r}"
+                raise CorruptFileError(
+                    f"{path}:{lineno}: expected 'x;y;theta_deg;opening;jaw_size', "
+                    f"got {s[:60]!r}"
                 ) from None
             try:
                 rects.append(GraspRectangle(x, y, -np.deg2rad(t), w, h))

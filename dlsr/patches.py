@@ -15,12 +15,13 @@ training rectangles, a patch accepted when at least ``min_valid`` (20 %) of its 
 from __future__ import annotations
 
 import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from sklearn.utils import check_random_state
+
+from .records import atomic_write, load_npz
 
 __all__ = [
     "extract_patches",
@@ -255,9 +256,7 @@ def save_patch_file(path, patches, masks, *, patch_size: int = 6, n_channels: in
         raise ValueError(f"patches must have shape (m, {shape}) or flattened, got {P.shape}")
     if not np.all(np.isfinite(P)):
         raise ValueError("patches contain non-finite values")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as f:
+    with atomic_write(path, "wb") as f:  # a kill leaves the old file or none, never half
         np.savez_compressed(f, patches=P, masks=Q.astype(bool))
 
 
@@ -285,20 +284,9 @@ def load_patch_file(path, *, patch_size: int = 6, n_channels: int = 8):
         the message names the file.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"patch file not found: {path}")
     shape = (patch_size, patch_size, n_channels)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if not hasattr(data, "files"):
-                raise ValueError("not an .npz archive")
-            missing = [k for k in ("patches", "masks") if k not in data.files]
-            if missing:
-                raise ValueError(f"missing array(s) {missing}; found {data.files}")
-            P = data["patches"]
-            Q = data["masks"]
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        raise ValueError(f"cannot read patch file {path}: {e}") from e
+    arrays = load_npz(path, ("patches", "masks"), what="patch file")
+    P, Q = arrays["patches"], arrays["masks"]
     if P.ndim != 4 or P.shape[1:] != shape:
         raise ValueError(f"patch file {path}: patches must have shape (m, {shape}), got {P.shape}")
     if Q.shape != P.shape:

@@ -47,7 +47,7 @@ from .features import (
     fit_representation,
     rectangle_features_multi,
 )
-from .records import read_jsonl
+from .records import atomic_write, file_errors, load_npz, read_jsonl, write_text_atomic
 from .svm import FeatureStandardizer, SquaredHingeSVC, squared_hinge_fit
 
 __all__ = [
@@ -518,7 +518,8 @@ def nested_cv_cells(
         for k in range(n_folds):
             path = rep_dir / f"{lrn}_fold{k}.npz" if rep_dir is not None else None
             if (lrn, k) not in reps and path is not None and path.exists():
-                with np.load(path) as z:
+                z = load_npz(path, ("meta",), what="saved representation")
+                with file_errors(path, "saved representation"):
                     meta = json.loads(str(z["meta"]))
                     reps[(lrn, k)] = Representation.from_arrays(z, lrn, meta["natural_param"])
     encoders_of: dict = {}
@@ -550,8 +551,8 @@ def nested_cv_cells(
                 if isinstance(param, np.generic):
                     param = param.item()
                 meta = json.dumps({"natural_param": param})
-                np.savez(rep_dir / f"{lrn}_fold{k}.npz", meta=np.array(meta),
-                         **rep.to_arrays())
+                with atomic_write(rep_dir / f"{lrn}_fold{k}.npz", "wb") as fh:
+                    np.savez(fh, meta=np.array(meta), **rep.to_arrays())
         if any((lrn, f) not in fold_results for f in range(n_folds)):
             continue
         rep_wall, rep_cpu = rep_cost[lrn]
@@ -712,7 +713,7 @@ def run_recognition_benchmark(
             plan.append(({**config, "n_atoms": d, "whiten": w}, list(FIGURE5_COMBINATIONS)))
     results_path = out / "results.jsonl"
     done: dict = {}  # configuration key -> {(learner, encoder): record}
-    for r in read_jsonl(results_path):
+    for r in read_jsonl(results_path, required=("learner", "encoder"), repair=True):
         done.setdefault(r.get("config_key"), {})[(r["learner"], r["encoder"])] = r
     keys = [_config_key(cfg) for cfg, _ in plan]
     total = sum(len(c) for _, c in plan)
@@ -749,10 +750,10 @@ def run_recognition_benchmark(
             for (cfg, _), records in zip(plan[1:], by_config[1:], strict=True)
             for (lrn, enc), r in records.items()
         ]
-    (out / "recognition.json").write_text(json.dumps(summary, indent=2))
-    (out / "table1.md").write_text(table1_markdown(summary["cells"]))
+    write_text_atomic(out / "recognition.json", json.dumps(summary, indent=2))
+    write_text_atomic(out / "table1.md", table1_markdown(summary["cells"]))
     if sizes:
-        (out / "figure5.md").write_text(figure5_markdown(summary["figure5"]))
+        write_text_atomic(out / "figure5.md", figure5_markdown(summary["figure5"]))
         plot_figure5(summary["figure5"], out / "figure5.png")
     return summary
 
