@@ -242,7 +242,7 @@ def random_urdf_objects(split: str = "all", root: str | os.PathLike | None = Non
     if split not in ("train", "test", "all"):
         raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
     if root is None:
-        import pybullet_data
+        from .sim import pybullet_data
 
         root = Path(pybullet_data.getDataPath()) / "random_urdfs"
     root = Path(root)
@@ -316,7 +316,7 @@ def _obj_to_urdf(obj: Path, cache: Path, name: str, mass: float, friction: float
         )
     collision = obj
     if decompose:
-        import pybullet
+        from .sim import pybullet
 
         collision = cache / f"{name}_vhacd.obj"
         if not collision.exists() or collision.stat().st_mtime < obj.stat().st_mtime:
@@ -407,10 +407,9 @@ def folder_objects(path: str | os.PathLike, split: str = "all", *, mass: float =
 
 def _pybullet_size(urdf: Path, scale: float) -> tuple[float, float, float]:
     """Extent of a URDF's collision AABB, from a throw-away DIRECT client."""
-    import pybullet
-    from pybullet_utils.bullet_client import BulletClient
+    from .sim import connect, pybullet
 
-    client = BulletClient(connection_mode=pybullet.DIRECT)
+    client = connect()
     try:
         body = client.loadURDF(str(urdf), globalScaling=scale)
         lo, hi = client.getAABB(body)

@@ -12,10 +12,69 @@ the same commands the result is bit-for-bit the same; ``restoreState`` is not re
 
 from __future__ import annotations
 
-import pybullet
-from pybullet_utils.bullet_client import BulletClient
+import contextlib
+import ctypes
+import os
+import sys
 
-__all__ = ["Simulation", "TIME_STEP"]
+__all__ = ["Simulation", "TIME_STEP", "connect", "quiet_c_output", "pybullet", "pybullet_data",
+           "BulletClient"]
+
+
+def _flush_c_streams() -> None:
+    """Flush C stdio buffers (pybullet's printf) so they land where fd 1 points now."""
+    with contextlib.suppress(Exception):
+        ctypes.CDLL(None).fflush(None)
+
+
+@contextlib.contextmanager
+def quiet_c_output(fds: tuple[int, ...] = (1, 2)):
+    """Send what C libraries write to file descriptors ``fds`` to ``/dev/null`` in the block.
+
+    pybullet prints ``pybullet build time: ...`` when imported and ``argv[0]=`` when a client
+    connects, from C straight to the process's stdout/stderr, which :data:`sys.stdout`
+    redirection does not catch; a command whose stdout is JSON would be spoiled. Python's own
+    streams are flushed first and C's before the descriptors are restored, so nothing written
+    before or after the block is lost or delayed. Where a descriptor cannot be duplicated
+    (closed), the block runs unchanged.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    _flush_c_streams()
+    saved: list[tuple[int, int]] = []
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+    except OSError:
+        yield
+        return
+    try:
+        for fd in fds:
+            try:
+                saved.append((fd, os.dup(fd)))
+            except OSError:
+                continue
+            os.dup2(null, fd)
+        yield
+    finally:
+        _flush_c_streams()
+        for fd, copy in saved:
+            os.dup2(copy, fd)
+            os.close(copy)
+        os.close(null)
+
+
+# Every pybullet import of the package goes through here (``from .sim import pybullet``).
+with quiet_c_output():
+    import pybullet
+    import pybullet_data
+    from pybullet_utils.bullet_client import BulletClient
+
+
+def connect() -> BulletClient:
+    """A new private pybullet client in DIRECT mode, its connection banner silenced."""
+    with quiet_c_output():
+        return BulletClient(connection_mode=pybullet.DIRECT)
 
 TIME_STEP = 1.0 / 240.0  #: s; pybullet's default and the step VGN uses.
 
@@ -45,7 +104,7 @@ class Simulation:
         self.time_step = time_step
         self.solver_iterations = solver_iterations
         self.gravity = gravity
-        self.client = BulletClient(connection_mode=pybullet.DIRECT)
+        self.client = connect()
         self.steps = 0
         self.reset()
 

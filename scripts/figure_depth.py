@@ -1,6 +1,6 @@
 """Render one table-top scene and write docs/depth_noise.png: RGB, clean and observed depth.
 
-The scene is built directly with a BulletClient (a textured table and a few built-in objects of
+The scene is built directly on a pybullet client (a textured table and a few built-in objects of
 every material class, dropped and settled) so that the figure only depends on the camera and the
 object set. Run: ``.venv/bin/python scripts/figure_depth.py [--out docs/depth_noise.png]``.
 """
@@ -11,11 +11,10 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-import pybullet
-from pybullet_utils.bullet_client import BulletClient
 
 from graspsim.camera import Camera, DepthNoise, depth_figure, look_down_pose, random_table_texture
 from graspsim.objects import builtin_objects, load_object
+from graspsim.sim import connect
 
 OBJECTS = [  # (name, x, y, yaw): one of each material class, concave and thin shapes
     ("mug_classic", 0.09, 0.07, 0.6),
@@ -60,7 +59,7 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=3)
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    client = BulletClient(connection_mode=pybullet.DIRECT)
+    client = connect()
     try:
         materials = build_scene(client, rng)
         T = look_down_pose(rng, height=(0.6, 0.6), jitter=(0.0, 0.05, 0.0))

@@ -1,0 +1,74 @@
+"""Fixtures of the graspsim tests: a small saved DLSR model and its scene's image files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import tifffile
+from PIL import Image
+
+from dlsr import patches, whitening
+from dlsr.detection import DLSRDetector, SearchGrid
+from dlsr.features import Representation, rectangle_features
+from dlsr.preprocess import rectangle_images
+from dlsr.svm import FeatureStandardizer, SquaredHingeSVC
+
+H, W = 100, 130
+
+
+def _scene():
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[0:H, 0:W]
+    rgb = 100 + 60 * np.sin(xx / 7.0)[..., None] + 40 * rng.random((H, W, 3))
+    depth = (0.8 + 0.0003 * xx).astype(np.float32)
+    mask = np.zeros((H, W), bool)
+    mask[40:60, 30:100] = True
+    depth[mask] -= 0.03
+    rgb[mask] = [200, 40, 40]
+    return {"rgb": np.clip(rgb, 0, 255).astype(np.uint8), "depth": depth,
+            "depth_valid": np.ones((H, W), bool), "mask": mask}
+
+
+def _small_model(obs):
+    """NKM-Natural on random whitened patches, an SVM on random labels: enough for the CLI."""
+    rng = np.random.default_rng(0)
+    R = np.column_stack([rng.uniform(35, 95, 40), rng.uniform(40, 60, 40),
+                         rng.uniform(-1.5, 1.5, 40), np.full(40, 30.0), np.full(40, 20.0)])
+    im, mk = rectangle_images(obs["rgb"], obs["depth"], obs["depth_valid"], R)
+    X, M = patches.extract_patches(im, mk, 6)
+    X, M = X.reshape(-1, 288), M.reshape(-1, 288)
+    Xs = whitening.standardize_patches(X, M)
+    mean, P = whitening.fit_zca(Xs, M)
+    Xw = whitening.apply_zca(Xs, M, mean, P)
+    cents = Xw[rng.choice(np.flatnonzero(M.all(1)), 16, replace=False)].astype(np.float32)
+    rep = Representation("NKM", cents / np.linalg.norm(cents, axis=1, keepdims=True), cents,
+                         mean, P, None)
+    F = rectangle_features(im, mk, rep, "Natural", None, polarity=False)
+    scaler = FeatureStandardizer().fit(F)
+    svm = SquaredHingeSVC().fit(scaler.transform(F), np.arange(40) % 2)
+    return DLSRDetector(rep, "Natural", None, False, scaler.mean_, scaler.scale_,
+                        np.asarray(svm.coef_[0]), float(svm.intercept_[0]))
+
+
+@pytest.fixture(scope="session")
+def saved_model(tmp_path_factory):
+    """``(path, obs)``: a small model saved at ``path`` (+ .npz/.json) and its scene."""
+    obs = _scene()
+    model = _small_model(obs)
+    grid = SearchGrid(angles_deg=(0, 90), openings=(20, 30), jaws=(10, 20), step=10.0,
+                      dilate=5)
+    model.config.update(grid=grid.to_dict(), rescore=10)
+    path = tmp_path_factory.mktemp("model") / "m"
+    model.save(path)
+    return path, obs
+
+
+@pytest.fixture
+def obs_files(saved_model, tmp_path):
+    """The saved model's scene written as ``rgb.png``, ``depth.tiff``, ``mask.png``."""
+    _, obs = saved_model
+    rgb, depth, mask = tmp_path / "rgb.png", tmp_path / "depth.tiff", tmp_path / "mask.png"
+    Image.fromarray(obs["rgb"]).save(rgb)
+    tifffile.imwrite(depth, obs["depth"])
+    Image.fromarray(obs["mask"].astype(np.uint8) * 255).save(mask)
+    return rgb, depth, mask
