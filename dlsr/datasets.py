@@ -26,7 +26,7 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from .metrics import rectangle_metric_many
-from .records import CorruptFileError, check_magic, file_errors
+from .records import CorruptFileError, check_magic, file_errors, write_text_atomic
 from .rectangles import GraspRectangle, array_to_rects, rects_to_array
 
 __all__ = [
@@ -581,8 +581,8 @@ def write_cornell_image(sample: GraspSample, root, number: int) -> str | None:
 def write_cornell_mapping(root, lines: Sequence[str]) -> Path:
     """Write the image-to-object mapping file of a Cornell-layout folder."""
     path = Path(root) / MAPPING_FILENAMES[0]
-    path.write_text("# image_number object_id original_image_id\n" + "".join(lines))
-    return path
+    return write_text_atomic(path, "# image_number object_id original_image_id\n"
+                             + "".join(lines))
 
 
 # --------------------------------------------------------------------------------------------

@@ -10,7 +10,7 @@ import numpy as np
 from dlsr import recognition as rec
 from dlsr.features import ENCODERS, LEARNERS
 from dlsr.metrics import jaccard_matrix, rectangle_metric
-from dlsr.records import read_jsonl
+from dlsr.records import file_errors, read_json, read_jsonl, write_text_atomic
 
 log = logging.getLogger(__name__)
 
@@ -43,16 +43,16 @@ def recognition_benchmark(
     n_jobs=1, seed=0, progress=True,
 ) -> dict:
     """Load ``data`` and run :func:`dlsr.recognition.run_recognition_benchmark`."""
+    extra = None
+    if extra_patches is not None:  # first: a bad file is reported before any long work
+        from dlsr.patches import load_patch_file
+
+        extra = load_patch_file(extra_patches)
     samples = load_samples(data, format, scale, mapping)
     rd = rec.recognition_data(samples, random_state=seed, max_rectangles=max_rectangles,
                               subset_random_state=seed)
     log.info("%d rectangles (%d positive) from %d images", len(rd), int(rd.labels.sum()),
              len(samples))
-    extra = None
-    if extra_patches is not None:
-        from dlsr.patches import load_patch_file
-
-        extra = load_patch_file(extra_patches)
     return rec.run_recognition_benchmark(
         rd, out, learners=learners or LEARNERS, encoders=encoders or ENCODERS, split=split,
         n_folds=n_folds, inner_folds=inner_folds,
@@ -115,12 +115,13 @@ def _recognition_choice(path, learner: str, encoder: str):
     import json
     from collections import Counter
 
-    summary = json.loads(Path(path).read_text())
-    for cell in summary.get("cells", []):
-        if cell.get("learner") == learner and cell.get("encoder") == encoder:
-            params = Counter(json.dumps(f.get("encoder_param")) for f in cell["folds"])
-            Cs = Counter(f.get("C") for f in cell["folds"])
-            return json.loads(params.most_common(1)[0][0]), Cs.most_common(1)[0][0]
+    summary = read_json(path, "recognition results")
+    with file_errors(path, "recognition results"):
+        for cell in summary.get("cells", []):
+            if cell.get("learner") == learner and cell.get("encoder") == encoder:
+                params = Counter(json.dumps(f.get("encoder_param")) for f in cell["folds"])
+                Cs = Counter(f.get("C") for f in cell["folds"])
+                return json.loads(params.most_common(1)[0][0]), Cs.most_common(1)[0][0]
     raise ValueError(f"{path}: no {learner}-{encoder} cell to take hyper-parameters from")
 
 
@@ -246,7 +247,9 @@ def detection_benchmark(
                  if k in config}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
-    done = {r["image_id"]: r for r in read_jsonl(results_path) if r.get("config_key") == key}
+    done = {r["image_id"]: r
+            for r in read_jsonl(results_path, required=("image_id",), repair=True)
+            if r.get("config_key") == key}
     baselines = {"random": ObjectRandomDetector(region=region), "mask-pca": MaskPCADetector()}
     if executor is None:
         from .executor import Executor
@@ -308,8 +311,8 @@ def detection_benchmark(
         "n_empty": int(sum(r["rect"] is None for r in recs)),
         "seconds_this_run": time.perf_counter() - t_run,
     }
-    (out / "detection.json").write_text(json.dumps(summary, indent=2))
-    (out / "table2.md").write_text(table2_markdown(summary))
+    write_text_atomic(out / "detection.json", json.dumps(summary, indent=2))
+    write_text_atomic(out / "table2.md", table2_markdown(summary))
     # overlays of the best and worst detections (by the best Jaccard index with a positive)
     ov = out / "overlays"
     ov.mkdir(exist_ok=True)

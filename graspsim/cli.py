@@ -49,9 +49,19 @@ def main(argv: list[str] | None = None) -> int:
         result = args.func(args)
     except (FileNotFoundError, ValueError) as exc:
         # Bad input is reported in one line naming the file or item, not as a stack trace.
-        print(f"graspsim {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return _error(args.command, exc)
+    except OSError as exc:
+        if exc.filename is None:  # not about a file the user gave: a real failure
+            raise
+        return _error(args.command, exc)  # a folder given as a file, no permission, ...
     return int(result or 0)
+
+
+def _error(command: str, exc: BaseException) -> int:
+    """Print ``graspsim CMD: error: MESSAGE`` on one line of stderr; the exit code 2."""
+    message = " ".join(str(exc).split()) or type(exc).__name__
+    print(f"graspsim {command}: error: {message}", file=sys.stderr)
+    return 2
 
 
 if __name__ == "__main__":

@@ -233,6 +233,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         and ``manifest`` (the path of ``scenes.json``) with its ``fingerprint`` (sha256).
     """
     from dlsr.datasets import write_cornell_image, write_cornell_mapping
+    from dlsr.records import read_json, write_json_atomic
 
     from .execution import ExecutionParams
     from .executor import Executor
@@ -247,10 +248,10 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
             "objects": objects if isinstance(objects, str) else [s.name for s in specs],
             "seed": seed, "n_candidates": n_candidates, "n_objects": n_objects}
     meta_path = root / "dataset_config.json"
-    if meta_path.exists() and json.loads(meta_path.read_text()) != meta:
+    if meta_path.exists() and read_json(meta_path, "dataset configuration") != meta:
         raise ValueError(f"{root} holds a dataset of another configuration ({meta_path}); "
                          "use a new folder")
-    meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+    write_json_atomic(meta_path, meta)
     log_path = root / "scenes.jsonl"
     done = read_done(log_path)  # a line cut by a kill is dropped: that scene is redone
     todo = [i for i in range(n_scenes) if i not in done]
@@ -313,7 +314,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         "manifest": str(manifest_path),
         "fingerprint": _sha256(manifest_path),
     }
-    (root / "labels.json").write_text(json.dumps(stats, indent=2) + "\n")
+    write_json_atomic(root / "labels.json", stats)
     return stats
 
 

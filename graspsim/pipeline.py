@@ -27,6 +27,8 @@ from dataclasses import asdict, dataclass, field
 from importlib import metadata
 from pathlib import Path
 
+from dlsr.records import file_errors, read_json, write_json_atomic
+
 log = logging.getLogger(__name__)
 
 __all__ = ["RunConfig", "load_config", "run_job", "resume_job", "QUICK"]
@@ -153,40 +155,81 @@ QUICK = {
 
 
 def load_config(path=None, quick: bool = False, **overrides) -> RunConfig:
-    """A :class:`RunConfig` from defaults, ``--quick``, a TOML or YAML file, then overrides."""
+    """A :class:`RunConfig` from defaults, ``--quick``, a TOML or YAML file, then overrides.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``path`` does not exist.
+    ValueError
+        The file is empty of settings, not TOML/YAML (truncated, garbage), or has unknown
+        settings or settings of the wrong type; the message names the file and the setting.
+    """
     values: dict = {}
     if quick:
         values.update(QUICK)
     if path is not None:
         path = Path(path)
-        if not path.exists():
+        if not path.is_file():
             raise FileNotFoundError(f"config file not found: {path}")
-        text = path.read_text()
-        if path.suffix.lower() == ".toml":
+        suffix = path.suffix.lower()
+        if suffix == ".toml":
             try:
                 import tomllib
             except ModuleNotFoundError:  # Python 3.10
                 import tomli as tomllib
-            data = tomllib.loads(text)
-        elif path.suffix.lower() in (".yaml", ".yml"):
+            parse, errors = tomllib.loads, ()
+        elif suffix in (".yaml", ".yml"):
             try:
                 import yaml
             except ModuleNotFoundError as exc:
                 raise ValueError(f"{path}: YAML configs need PyYAML (pip install pyyaml); "
                                  "TOML works out of the box") from exc
-            data = yaml.safe_load(text) or {}
+            parse, errors = yaml.safe_load, (yaml.YAMLError,)
         else:
             raise ValueError(f"{path}: config must be .toml, .yaml or .yml")
+        with file_errors(path, "config file", errors):
+            data = parse(path.read_bytes().decode("utf-8"))
+        if not data:  # an empty (or truncated to nothing) file is not "the defaults"
+            raise ValueError(f"config file {path}: no settings (empty file)")
         if not isinstance(data, dict):
-            raise ValueError(f"{path}: expected a table of settings")
+            raise ValueError(f"config file {path}: expected a table of settings, got "
+                             f"{type(data).__name__}")
         data = data.get("run", data)
-        known = {f.name for f in dataclasses.fields(RunConfig)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ValueError(f"{path}: unknown settings {unknown}; known: {sorted(known)}")
-        values.update(data)
+        values.update(_settings(data, f"config file {path}"))
     values.update({k: v for k, v in overrides.items() if v is not None})
     return RunConfig(**values).validated()
+
+
+# The Python types each RunConfig annotation accepts (an int is a float; a bool is no int).
+_TYPES = {"int": (int,), "float": (int, float), "bool": (bool,), "str": (str,),
+          "None": (type(None),), "list[str]": (list,)}
+
+
+def _settings(data, where: str) -> dict:
+    """``data`` checked to be settings of :class:`RunConfig`: known names, right types.
+
+    An annotation this check does not know is not checked (``validated`` still runs).
+    """
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a table of settings, got {type(data).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(RunConfig)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise ValueError(f"{where}: unknown settings {unknown}; known: {sorted(fields)}")
+    for name, value in data.items():
+        kinds = [_TYPES.get(t.strip()) for t in str(fields[name].type).split("|")]
+        if any(k is None for k in kinds):
+            continue
+        ok = any(isinstance(value, k) for k in kinds)
+        if isinstance(value, bool) and bool not in sum(kinds, ()):
+            ok = False
+        if isinstance(value, list) and not all(isinstance(v, str) for v in value):
+            ok = False
+        if not ok:
+            raise ValueError(f"{where}: setting {name!r} must be {fields[name].type}, "
+                             f"got {value!r}")
+    return data
 
 
 def _versions() -> dict:
@@ -205,7 +248,7 @@ class _Stages:
 
     def __init__(self, root: Path):
         self.path = root / "stages.json"
-        self.data = json.loads(self.path.read_text()) if self.path.exists() else {}
+        self.data = read_json(self.path, "stage record") if self.path.exists() else {}
 
     def done(self, name):
         return name in self.data
@@ -215,9 +258,7 @@ class _Stages:
 
     def finish(self, name, result):
         self.data[name] = result
-        tmp = self.path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(self.data, indent=2, default=str))
-        tmp.replace(self.path)
+        write_json_atomic(self.path, self.data, default=str)
 
 
 def _recorded_config(recorded):
@@ -252,7 +293,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
     run_json = root / "run.json"
     cfg = asdict(config)
     if run_json.exists():
-        old = json.loads(run_json.read_text())
+        old = read_json(run_json, "run record")
         if not resume:
             raise ValueError(f"{root} already holds a run: use --resume {root} or a new --out")
         if _recorded_config(old.get("config")) != json.loads(json.dumps(cfg)):
@@ -260,10 +301,10 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
                              "use a new --out")
         log.info("continuing the run in %s", root)
     else:
-        run_json.write_text(json.dumps({
+        write_json_atomic(run_json, {
             "config": cfg, "versions": _versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
             "machine": {"platform": platform.platform(), "cpus": _cpus()},
-        }, indent=2))
+        })
     seeds = dict(zip(("dataset", "recognition", "detection", "model", "trials"),
                      task_seeds(config.seed, 5), strict=True))
     ex = Executor(backend=config.backend, n_jobs=config.jobs, address=config.address,
@@ -402,5 +443,9 @@ def resume_job(folder, progress: bool = True) -> Path:
     run_json = folder / "run.json"
     if not run_json.exists():
         raise FileNotFoundError(f"no run to resume: {run_json} is missing")
-    config = RunConfig(**json.loads(run_json.read_text())["config"]).validated()
+    recorded = read_json(run_json, "run record")
+    if "config" not in recorded:
+        raise ValueError(f"run record {run_json}: no 'config'")
+    config = RunConfig(**_settings(recorded["config"], f"run record {run_json} config"))
+    config = config.validated()
     return run_job(config, out=folder, resume=True, progress=progress)

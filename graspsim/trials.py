@@ -41,6 +41,13 @@ from pathlib import Path
 import numpy as np
 
 from dlsr.metrics import rectangle_metric
+from dlsr.records import (
+    CorruptFileError,
+    read_json,
+    read_jsonl,
+    write_json_atomic,
+    write_text_atomic,
+)
 
 from .detectors import check_detections, load_detector, one_line
 from .execution import ExecutionParams, execute_grasp, run_grasp
@@ -320,26 +327,21 @@ def _trial_task(specs, detector, seed, index, config, params):
 
 
 def read_done(path: Path) -> dict[int, dict]:
-    """Complete records of a JSONL file by index; a torn line is dropped and the file rewritten
-    (so appended records start on a line of their own)."""
-    from dlsr.records import read_jsonl
+    """Complete records of a resumable JSONL file by their ``index`` (the first of repeats).
 
+    A torn last line (a kill during a write) is dropped and the file repaired, so appended
+    records start on a line of their own (see :func:`dlsr.records.read_jsonl`); any other bad
+    line, or an ``index`` that is not a non-negative integer, is an error naming the file and
+    line.
+    """
     path = Path(path)
-    if not path.exists():
-        return {}
     done: dict[int, dict] = {}
-    for rec in read_jsonl(path):
-        try:
-            done.setdefault(int(rec["index"]), rec)
-        except (KeyError, TypeError, ValueError):
-            continue
-    text = path.read_text()
-    lines = [ln for ln in text.splitlines() if ln.strip()]
-    if len(lines) != len(done) or (lines and not text.endswith("\n")):
-        log.warning("%s: dropped an incomplete line left by an interrupted run", path)
-        tmp = path.with_suffix(".jsonl.tmp")
-        tmp.write_text("".join(json.dumps(r) + "\n" for r in done.values()))
-        tmp.replace(path)
+    for rec in read_jsonl(path, required=("index",), repair=True):
+        i = rec["index"]
+        if isinstance(i, bool) or not isinstance(i, int) or i < 0:
+            raise CorruptFileError(f"results file {path}: a record has index {i!r}, "
+                                   "not a non-negative integer")
+        done.setdefault(i, rec)
     return done
 
 
@@ -354,12 +356,12 @@ def _open_campaign(out, meta: dict, filename: str):
     out.mkdir(parents=True, exist_ok=True)
     cfg_path = out / "config.json"
     if cfg_path.exists():
-        old = json.loads(cfg_path.read_text())
+        old = read_json(cfg_path, "trials configuration")
         if {k: old.get(k) for k in meta} != json.loads(json.dumps(meta)):
             raise ValueError(
                 f"{out} holds trials of another configuration ({cfg_path}); use a new folder"
             )
-    cfg_path.write_text(json.dumps(meta, indent=2) + "\n")
+    write_json_atomic(cfg_path, meta)
     jsonl = out / filename
     return out, jsonl, read_done(jsonl)
 
@@ -452,8 +454,8 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     summary["trials_per_second"] = (new / wall) if new and wall > 0 else None
     summary["n_jobs"] = n_jobs if executor is None else executor.n_jobs
     if out is not None:
-        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-        (out / "summary.md").write_text(summary_markdown(summary))
+        write_json_atomic(out / "summary.json", summary)
+        write_text_atomic(out / "summary.md", summary_markdown(summary))
     summary["records"] = records
     return summary
 
