@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..records import atomic_write
 from .model import DLSRDetector
 
 
@@ -61,6 +62,7 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
         from ..viz import draw_rectangles
 
         img = draw_rectangles(rgb_arr, det.rects[:1], negatives=det.rects[1:][::-1])
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(img).save(out)
+        kind = Image.registered_extensions().get(Path(out).suffix.lower(), "PNG")
+        with atomic_write(out, "wb") as fh:  # never a half-written overlay
+            Image.fromarray(img).save(fh, format=kind)
     return det

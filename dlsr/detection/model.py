@@ -6,13 +6,16 @@ Part of :mod:`dlsr.detection`.
 
 from __future__ import annotations
 
+import hashlib
+import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..features import Representation, rectangle_features
+from ..features import ENCODERS, LEARNERS, Representation, rectangle_features
+from ..records import CorruptFileError, atomic_write, load_npz, read_json, write_text_atomic
 from ..rectangles import GraspRectangle
 from .grid import SearchGrid
 
@@ -163,19 +166,24 @@ class DLSRDetector:
     def save(self, path) -> tuple[Path, Path]:
         """Write ``<path>.npz`` (arrays) and ``<path>.json`` (everything else); never pickle.
 
-        ``path`` may end in ``.npz`` or ``.json`` (the suffix is replaced).
+        ``path`` may end in ``.npz`` or ``.json`` (the suffix is replaced). Each file is
+        written to a temporary file and renamed, so a kill or an error never leaves a
+        half-written one; the JSON records the SHA-256 of the arrays, so :meth:`load` also
+        refuses an ``.npz`` and ``.json`` of two different saves.
         """
         npz, js = self._paths(path)
-        npz.parent.mkdir(parents=True, exist_ok=True)
         arrays = self.representation.to_arrays(prefix="rep_")
         arrays.update(scaler_mean=np.asarray(self.scaler_mean),
                       scaler_scale=np.asarray(self.scaler_scale),
                       coef=np.asarray(self.coef), intercept=np.asarray([self.intercept]))
-        np.savez(npz, **{k: np.asarray(v) for k, v in arrays.items()})
+        buf = io.BytesIO()
+        np.savez(buf, **{k: np.asarray(v) for k, v in arrays.items()})
+        data = buf.getvalue()
         meta = {
             "format": "dlsr-detector",
             "version": FORMAT_VERSION,
             "arrays": npz.name,
+            "arrays_sha256": hashlib.sha256(data).hexdigest(),
             "learner": self.representation.learner,
             "natural_param": _jsonable(self.representation.natural_param),
             "encoder": self.encoder,
@@ -184,27 +192,42 @@ class DLSRDetector:
             "preprocess": self.preprocess,
             "config": self.config,
         }
-        js.write_text(json.dumps(meta, indent=2))
+        text = json.dumps(meta, indent=2)  # before any file is touched: fails on bad config
+        with atomic_write(npz, "wb") as fh:
+            fh.write(data)
+        write_text_atomic(js, text)
         return npz, js
 
     @classmethod
     def load(cls, path) -> DLSRDetector:
-        """Read a model written by :meth:`save` (``path`` with or without suffix)."""
+        """Read a model written by :meth:`save` (``path`` with or without suffix).
+
+        Raises
+        ------
+        FileNotFoundError
+            One of the two files is missing.
+        ValueError
+            A file is truncated, empty, not JSON / npz, of another save than its partner, or
+            holds values a model cannot have (unknown learner or encoder, arrays of
+            inconsistent shapes or non-finite values, a bad search grid); the message names
+            the file and what is wrong.
+        """
         npz, js = cls._paths(path)
         for p in (js, npz):
             if not p.is_file():
                 raise FileNotFoundError(f"detector model file not found: {p}")
-        try:
-            meta = json.loads(js.read_text())
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{js}: not a JSON detector description: {exc}") from exc
+        meta = read_json(js, "model file")
         if meta.get("format") != "dlsr-detector":
-            raise ValueError(f"{js}: not a DLSR detector model (format {meta.get('format')!r})")
-        with np.load(npz, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-        for key in ("scaler_mean", "scaler_scale", "coef", "intercept", "rep_dictionary"):
-            if key not in arrays:
-                raise ValueError(f"{npz}: missing array {key!r}")
+            raise CorruptFileError(f"model file {js}: not a DLSR detector model (format "
+                                   f"{meta.get('format')!r})")
+        _check_meta(meta, js)
+        digest = meta.get("arrays_sha256")
+        if digest is not None and hashlib.sha256(npz.read_bytes()).hexdigest() != digest:
+            raise CorruptFileError(f"model file {npz}: not the arrays {js.name} was saved with "
+                                   "(changed, truncated or from another save)")
+        arrays = load_npz(npz, ("scaler_mean", "scaler_scale", "coef", "intercept",
+                                "rep_dictionary"), what="model file")
+        _check_arrays(arrays, bool(meta["polarity"]), npz)
         rep = Representation.from_arrays(arrays, meta["learner"], meta.get("natural_param"),
                                          prefix="rep_")
         return cls(representation=rep, encoder=meta["encoder"],
@@ -213,3 +236,82 @@ class DLSRDetector:
                    coef=arrays["coef"], intercept=float(arrays["intercept"][0]),
                    preprocess=dict(meta.get("preprocess") or _default_preprocess()),
                    config=dict(meta.get("config") or {}))
+
+
+def _check_meta(meta: dict, js: Path) -> None:
+    """Refuse a model description a detector could not run with (message naming ``js``)."""
+
+    def bad(what):
+        raise CorruptFileError(f"model file {js}: {what}")
+
+    version = meta.get("version")
+    if not isinstance(version, int) or version > FORMAT_VERSION:
+        bad(f"format version {version!r}; this dlsr reads versions up to {FORMAT_VERSION}")
+    if meta.get("learner") not in LEARNERS:
+        bad(f"learner must be one of {LEARNERS}, got {meta.get('learner')!r}")
+    if meta.get("encoder") not in ENCODERS:
+        bad(f"encoder must be one of {ENCODERS}, got {meta.get('encoder')!r}")
+    if not isinstance(meta.get("polarity"), bool):
+        bad(f"polarity must be true or false, got {meta.get('polarity')!r}")
+    for key in ("encoder_param", "natural_param"):
+        v = meta.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float)
+                              or not np.isfinite(v)):
+            bad(f"{key} must be a number or null, got {v!r}")
+    pre = meta.get("preprocess")
+    if pre is not None:
+        known = _default_preprocess()
+        if not isinstance(pre, dict) or set(pre) - set(known):
+            bad(f"preprocess must be a table of {sorted(known)}, got {pre!r}"[:300])
+    config = meta.get("config")
+    if config is None:
+        return
+    if not isinstance(config, dict):
+        bad(f"config must be a table, got {type(config).__name__}")
+    if config.get("detector", "dense") not in ("dense", "exact"):
+        bad(f"config detector must be 'dense' or 'exact', got {config['detector']!r}")
+    if "grid" in config:
+        g = config["grid"]
+        try:
+            grid = SearchGrid.from_dict(g)
+            values = [*grid.angles_deg, *grid.openings, *grid.jaws, grid.step,
+                      grid.min_coverage]
+            ok = (all(isinstance(v, int | float) and np.isfinite(v) for v in values)
+                  and grid.openings and grid.jaws and grid.angles_deg and grid.step > 0
+                  and isinstance(grid.dilate, int) and grid.dilate >= 0
+                  and 0 <= grid.min_coverage <= 1
+                  and grid.coverage_on in ("dilated", "object"))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            bad(f"config grid is not a search grid: {g!r}"[:300])
+
+
+def _check_arrays(arrays: dict, polarity: bool, npz: Path) -> None:
+    """Refuse arrays of inconsistent shapes or non-finite values (message naming ``npz``)."""
+
+    def bad(what):
+        raise CorruptFileError(f"model file {npz}: {what}")
+
+    dim = PATCH * PATCH * 8
+    D = arrays["rep_dictionary"]
+    if D.ndim != 2 or D.shape[1] != dim or len(D) == 0:
+        bad(f"rep_dictionary must have shape (n_atoms, {dim}), got {D.shape}")
+    shapes = {"rep_centroids": D.shape, "rep_zca_mean": (dim,), "rep_zca_matrix": (dim, dim),
+              "intercept": (1,)}
+    n_features = 4 * len(D) * (2 if polarity else 1)
+    shapes.update(dict.fromkeys(("coef", "scaler_mean", "scaler_scale"), (n_features,)))
+    for key, shape in shapes.items():
+        a = arrays.get(key)
+        if a is None:
+            continue
+        if a.shape != shape:
+            bad(f"{key} must have shape {shape} for {len(D)} atoms"
+                f"{' with polarity' if polarity else ''}, got {a.shape}")
+    if ("rep_zca_mean" in arrays) != ("rep_zca_matrix" in arrays):
+        bad("rep_zca_mean and rep_zca_matrix go together")
+    for key, a in arrays.items():
+        if not np.issubdtype(a.dtype, np.number) or not np.all(np.isfinite(a)):
+            bad(f"{key} must hold finite numbers")
+    if np.any(arrays["scaler_scale"] <= 0):
+        bad("scaler_scale must be positive")

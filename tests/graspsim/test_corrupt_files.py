@@ -5,6 +5,7 @@ naming the file and line."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 
@@ -70,6 +71,101 @@ def _detect(files, depth=None):
                  "--depth", str(depth or files["depth"]), "--mask", str(files["mask"])])
 
 
+def _npz_with(path, **changes):
+    """Rewrite the model's arrays with ``changes`` (None: removed), its JSON made to match."""
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays.update(changes)
+    np.savez(path, **{k: v for k, v in arrays.items() if v is not None})
+    _json_with(path.with_suffix(".json"),
+               arrays_sha256=hashlib.sha256(path.read_bytes()).hexdigest())
+
+
+def _without_digest(damage):
+    """``damage`` to a model saved before the JSON recorded its arrays' digest."""
+    def apply(path):
+        meta = json.loads(path.with_suffix(".json").read_text())
+        meta.pop("arrays_sha256")
+        path.with_suffix(".json").write_text(json.dumps(meta))
+        damage(path)
+    return apply
+
+
+def _json_with(path, **changes):
+    meta = json.loads(path.read_text())
+    meta.update(changes)
+    path.write_text(json.dumps(meta))
+
+
+MODEL_CASES = {
+    "npz-1000-bytes": ("m.npz", lambda p: corrupt(p, p.read_bytes()[:1000])),
+    "npz-truncated": ("m.npz", lambda p: corrupt(p, "truncated")),
+    "npz-empty": ("m.npz", lambda p: corrupt(p, "empty")),
+    "npz-garbage": ("m.npz", lambda p: corrupt(p, "garbage")),
+    "npz-of-another-save": ("m.npz", lambda p: np.savez(p, **{**dict(np.load(p)),
+                                                             "intercept": np.ones(1)})),
+    "old-npz-1000-bytes": ("m.npz", _without_digest(lambda p: corrupt(p, p.read_bytes()[:1000]))),
+    "old-npz-empty": ("m.npz", _without_digest(lambda p: corrupt(p, "empty"))),
+    "old-npz-garbage": ("m.npz", _without_digest(lambda p: corrupt(p, "garbage"))),
+    "npz-missing-array": ("m.npz", lambda p: _npz_with(p, coef=None)),
+    "npz-coef-length": ("m.npz", lambda p: _npz_with(p, coef=np.ones(7))),
+    "npz-dictionary-shape": ("m.npz", lambda p: _npz_with(p, rep_dictionary=np.ones((4, 5)))),
+    "npz-nan": ("m.npz", lambda p: _npz_with(p, coef=np.full(
+        np.load(p)["coef"].shape, np.nan))),
+    "npz-zero-scale": ("m.npz", lambda p: _npz_with(p, scaler_scale=np.zeros(
+        np.load(p)["scaler_scale"].shape))),
+    "json-truncated": ("m.json", lambda p: corrupt(p, "truncated")),
+    "json-empty": ("m.json", lambda p: corrupt(p, "empty")),
+    "json-garbage": ("m.json", lambda p: corrupt(p, "garbage")),
+    "json-list": ("m.json", lambda p: corrupt(p, "[1, 2]")),
+    "json-no-learner": ("m.json", lambda p: _json_with(p, learner=None)),
+    "json-bad-encoder": ("m.json", lambda p: _json_with(p, encoder="Fourier")),
+    "json-bad-preprocess": ("m.json", lambda p: _json_with(p, preprocess="fast")),
+    "json-newer-version": ("m.json", lambda p: _json_with(p, version=99)),
+    "json-param-string": ("m.json", lambda p: _json_with(p, encoder_param="0.5")),
+    "json-bad-grid": ("m.json", lambda p: _json_with(p, config={"grid": {"step": "ten"}})),
+    "json-bad-grid-key": ("m.json", lambda p: _json_with(p, config={"grid": {"stp": 1}})),
+    "json-bad-detector": ("m.json", lambda p: _json_with(p, config={"detector": "fast"})),
+}
+
+
+@pytest.mark.parametrize("case", MODEL_CASES)
+def test_detect_corrupt_model(detect_files, capsys, case):
+    files, _ = detect_files
+    name, damage = MODEL_CASES[case]
+    damage(files["model"].with_name(name))
+    one_line_error(capsys, _detect(files), "detect", files["model"].with_name(name))
+
+
+def test_model_save_never_leaves_a_half_written_or_mismatched_model(saved_model, tmp_path,
+                                                                    monkeypatch):
+    from dlsr.detection import DLSRDetector, model
+
+    target = tmp_path / "m"
+    m = DLSRDetector.load(saved_model[0])
+    m.save(target)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    m.config["callback"] = object()  # not JSON: refused before any file is touched
+    with pytest.raises(TypeError):
+        m.save(target)
+    del m.config["callback"]
+    m.intercept += 1.0
+
+    def killed(path, text):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(model, "write_text_atomic", killed)  # killed between the two files
+    with pytest.raises(KeyboardInterrupt):
+        m.save(target)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before)  # no temporary file
+    assert (tmp_path / "m.json").read_bytes() == before["m.json"]
+    with pytest.raises(ValueError, match=r"m\.npz: not the arrays m\.json was saved with"):
+        DLSRDetector.load(target)
+    monkeypatch.undo()
+    m.save(target)
+    assert DLSRDetector.load(target).intercept == pytest.approx(m.intercept)
+
+
 def _rgb_other_size(p, obs):
     Image.fromarray(obs["rgb"][:-3]).save(p, format="PNG")
 
@@ -114,6 +210,14 @@ def test_detect_corrupt_npy_depth(detect_files, capsys, how, tmp_path):
         np.save(path, obs["depth"])
         corrupt(path, how)
     one_line_error(capsys, _detect(files, depth=path), "detect", path)
+
+
+def test_trials_corrupt_model(detect_files, capsys, tmp_path):
+    files, _ = detect_files
+    corrupt(files["model"].with_suffix(".npz"), "truncated")
+    code = main(["trials", "--detector", str(files["model"]), "--n", "1",
+                 "--out", str(tmp_path / "t")])
+    one_line_error(capsys, code, "trials", files["model"].with_suffix(".npz"))
 
 
 # --------------------------------------------------------------------------------------------
