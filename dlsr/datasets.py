@@ -14,9 +14,11 @@ source, inconsistent object ids) raises ``ValueError`` / ``FileNotFoundError`` n
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import re
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,8 +57,17 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-# What Pillow raises on unreadable images beyond the common parser errors.
-_IMAGE_ERRORS = (UnidentifiedImageError, Image.DecompressionBombError)
+# What Pillow raises on unreadable images beyond the common parser errors (and its warning on a
+# truncated TIFF, made an error by _reading_image).
+_IMAGE_ERRORS = (UnidentifiedImageError, Image.DecompressionBombError, UserWarning)
+
+
+@contextlib.contextmanager
+def _reading_image(path, what: str):
+    """:func:`dlsr.records.file_errors` for Pillow: a truncated image is an error too."""
+    with warnings.catch_warnings(), file_errors(path, what, _IMAGE_ERRORS):
+        warnings.filterwarnings("error", message="Truncated File Read", category=UserWarning)
+        yield
 
 CORNELL_WIDTH = 640
 """Row length used by the Cornell point-cloud pixel index (``index = row * 640 + col``)."""
@@ -107,7 +118,7 @@ def read_rgb(path: Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"image file not found: {path}")
-    with file_errors(path, "cannot read image", _IMAGE_ERRORS):
+    with _reading_image(path, "cannot read image"):
         with Image.open(path) as im:
             return np.array(im.convert("RGB"), dtype=np.uint8)
 
@@ -117,7 +128,7 @@ def read_gray(path: Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"image file not found: {path}")
-    with file_errors(path, "cannot read image", _IMAGE_ERRORS):
+    with _reading_image(path, "cannot read image"):
         with Image.open(path) as im:
             return np.array(im.convert("L"))
 
@@ -128,7 +139,7 @@ def read_depth_image(path: Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"depth file not found: {path}")
-    with file_errors(path, "cannot read depth image", _IMAGE_ERRORS):
+    with _reading_image(path, "cannot read depth image"):
         if path.stat().st_size == 0:
             raise CorruptFileError(f"cannot read depth image {path}: empty file")
         if path.suffix == ".npy":
@@ -202,7 +213,8 @@ def read_pcd_depth(path, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray
     fields = header.get("FIELDS")
     if not fields or not {"x", "y", "z", "index"} <= set(fields):
         raise ValueError(f"point cloud {path}: FIELDS must include x y z index, got {fields}")
-    with file_errors(path, "malformed point cloud data in"):
+    with file_errors(path, "malformed point cloud data in"), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*input contained no data")  # POINTS checks
         data = np.loadtxt(path, skiprows=n_header, ndmin=2, dtype=np.float64, encoding="utf-8")
     if data.size and data.shape[1] != len(fields):
         raise ValueError(f"point cloud {path}: {data.shape[1]} columns, FIELDS has {len(fields)}")

@@ -8,7 +8,11 @@ import json
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "detect", help="detect grasps in one RGB-D image with a trained DLSR model"
+        "detect", help="detect grasps in one RGB-D image with a trained DLSR model",
+        description="Detect grasps in one RGB-D image. stdout is one JSON object (rectangles "
+                    "best first, scores, candidates, seconds, reason), so `graspsim detect ... "
+                    "> result.json` keeps it; progress and errors go to stderr. Exit code 0 "
+                    "with detections, 1 without (the reason says why), 2 on bad input.",
     )
     p.add_argument("--model", required=True,
                    help="saved model (PATH.npz + PATH.json, e.g. from benchmark --save-model)")

@@ -176,6 +176,8 @@ IMAGE_CASES = {
     "rgb-garbage": ("rgb", "garbage"),
     "rgb-other-size": ("rgb", _rgb_other_size),
     "depth-truncated": ("depth", "truncated"),
+    "depth-100-bytes": ("depth", lambda p, obs: corrupt(p, p.read_bytes()[:100])),
+    "rgb-100-bytes": ("rgb", lambda p, obs: corrupt(p, p.read_bytes()[:100])),
     "depth-empty": ("depth", "empty"),
     "depth-garbage": ("depth", "garbage"),
     "depth-three-channels": ("depth", lambda p, obs: tifffile.imwrite(p, obs["rgb"])),
@@ -327,6 +329,7 @@ PCD = ("# .PCD v0.7\nFIELDS x y z rgb index\nSIZE 4 4 4 4 4\nTYPE F F F F U\nCOU
 
 @pytest.mark.parametrize("content", [
     PCD[:-20],                                  # truncated: fewer points than POINTS
+    PCD[:PCD.index("1 2 600")],                 # truncated after the header: no points
     "",                                         # empty
     GARBAGE,                                    # garbage
     PCD.replace("0 7\n", "7\n"),                # a row of 4 numbers for 5 fields
