@@ -42,8 +42,8 @@ log = logging.getLogger(__name__)
 
 #: What parsers raise on truncated, empty, garbage or wrong-shape content.
 PARSE_ERRORS: tuple[type[BaseException], ...] = (
-    ValueError, KeyError, IndexError, TypeError, EOFError, OSError, zipfile.BadZipFile,
-    zlib.error,
+    ValueError, KeyError, IndexError, TypeError, AttributeError, EOFError, OSError,
+    zipfile.BadZipFile, zlib.error,
 )
 
 

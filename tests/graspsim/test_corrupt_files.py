@@ -404,13 +404,13 @@ def test_benchmark_detection_record_without_its_key(cornell_root, tmp_path, caps
                                                   out / "results.jsonl")
 
 
-@pytest.mark.parametrize("how", ["truncated", "empty", "garbage", "no-cells"])
+@pytest.mark.parametrize("how", ["truncated", "empty", "garbage", "no-folds", "cell-list"])
 def test_benchmark_detection_corrupt_recognition_json(cornell_root, tmp_path, capsys, how):
     path = tmp_path / "recognition.json"
     path.write_text(json.dumps({"cells": [{"learner": "NKM", "encoder": "Natural",
                                            "folds": [{"encoder_param": None, "C": 1.0}]}]}))
-    corrupt(path, '{"cells": [{"learner": "NKM", "encoder": "Natural"}]}'
-            if how == "no-cells" else how)
+    corrupt(path, {"no-folds": '{"cells": [{"learner": "NKM", "encoder": "Natural"}]}',
+                   "cell-list": '{"cells": [[1, 2]]}'}.get(how, how))
     code = main(["benchmark", "detection", "--data", str(cornell_root), "--format", "cornell",
                  "--split", "image", "--folds", "2", "--recognition", str(path),
                  "--out", str(tmp_path / "b")])
