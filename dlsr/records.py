@@ -77,8 +77,9 @@ def file_errors(path, what: str = "file", extra: tuple[type[BaseException], ...]
     """Re-raise a parser's error on ``path`` as one :class:`CorruptFileError` naming the file.
 
     ``FileNotFoundError`` and :class:`CorruptFileError` pass unchanged (they already name
-    their file); every other error of :data:`PARSE_ERRORS` (plus ``extra``, e.g.
-    ``yaml.YAMLError``) becomes ``CorruptFileError("<what> <path>: <reason>")`` on one line.
+    their file), as does the text of a ``ValueError`` naming ``path``; every other error of
+    :data:`PARSE_ERRORS` (plus ``extra``, e.g. ``yaml.YAMLError``) becomes
+    ``CorruptFileError("<what> <path>: <reason>")`` on one line.
 
     Parameters
     ----------
@@ -94,6 +95,9 @@ def file_errors(path, what: str = "file", extra: tuple[type[BaseException], ...]
     except (FileNotFoundError, CorruptFileError):
         raise
     except PARSE_ERRORS + tuple(extra) as exc:
+        text = " ".join(str(exc).split())
+        if isinstance(exc, ValueError) and str(path) in text:  # already names the file
+            raise CorruptFileError(text) from exc
         raise CorruptFileError(f"{what} {path}: {_one_line(exc, path)}") from exc
 
 

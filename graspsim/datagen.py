@@ -273,7 +273,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
                      "camera": f"{stem}camera.json"}
             cam = {"image": entry["image"], **{k: entry["camera"][k] for k in
                    ("width", "height", "K", "T_world_cam", "depth_unit", "frame")}}
-            (root / files["camera"]).write_text(json.dumps(cam, indent=1) + "\n")
+            write_json_atomic(root / files["camera"], cam, indent=1)
             rec = {**entry, "files": files, "depth_sha256": _sha256(root / files["depth"]),
                    "object_id": sample.object_id, "mapping": line,
                    "positives": len(sample.positives), "negatives": len(sample.negatives),
@@ -296,7 +296,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         "images": [{k: v for k, v in r.items() if k != "mapping"} for r in records],
     }
     manifest_path = root / MANIFEST
-    manifest_path.write_text(json.dumps(manifest, indent=1) + "\n")
+    write_json_atomic(manifest_path, manifest, indent=1)
     reasons: dict[str, int] = {}
     for r in records:
         for k, v in r["outcomes"].items():

@@ -27,12 +27,13 @@ flushed, resumed per round like ``trials.jsonl``), ``config.json`` (``"mode": "d
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from dataclasses import asdict
 
 import numpy as np
+
+from dlsr.records import write_json_atomic, write_text_atomic
 
 from .execution import ExecutionParams
 from .scene import TABLE_HALF_SIZE, PlacedObject, Scene, build_scene, capture, link_pose, settle
@@ -261,8 +262,8 @@ def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, 
     summary["rounds_per_second"] = (new / wall) if new and wall > 0 else None
     summary["n_jobs"] = n_jobs if executor is None else executor.n_jobs
     if out is not None:
-        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-        (out / "summary.md").write_text(rounds_markdown(summary))
+        write_json_atomic(out / "summary.json", summary)
+        write_text_atomic(out / "summary.md", rounds_markdown(summary))
     summary["records"] = records
     return summary
 

@@ -73,6 +73,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from dlsr.records import file_errors, read_json, write_json_atomic, write_text_atomic
 from dlsr.rectangles import GraspRectangle
 
 __all__ = [
@@ -133,10 +134,8 @@ def load_manifest(data) -> tuple[dict, str]:
             f"{path} not found: score needs a dataset written by `graspsim dataset` (datasets "
             "made before the manifest existed must be generated again)")
     raw = path.read_bytes()
-    try:
-        manifest = json.loads(raw)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    with file_errors(path, "dataset manifest"):
+        manifest = json.loads(raw.decode("utf-8"))
     if not isinstance(manifest, dict) or manifest.get("format") != MANIFEST_FORMAT:
         got = manifest.get("format") if isinstance(manifest, dict) else None
         raise ValueError(f"{path}: format {got!r}, expected {MANIFEST_FORMAT!r}")
@@ -234,7 +233,7 @@ def _image_id(token: str) -> str:
 def _read_csv(path: Path, image_ids) -> dict[str, list[GraspRectangle]]:
     rows: dict[str, list[tuple[float, int, GraspRectangle]]] = {}
     n_cols = None
-    with open(path, newline="") as fh:
+    with file_errors(path, "prediction file"), open(path, newline="", encoding="utf-8") as fh:
         for lineno, row in enumerate(csv.reader(fh), start=1):
             if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):
                 continue
@@ -508,13 +507,13 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
         out.mkdir(parents=True, exist_ok=True)
         cfg_path = out / "config.json"
         if cfg_path.exists():
-            old = json.loads(cfg_path.read_text())
+            old = read_json(cfg_path, "scoring configuration")
             keys = ("dataset_fingerprint", "predictions_sha256", "format", "top_k")
             changed = [k for k in keys if old.get(k) != config[k]]
             if changed:
                 raise ValueError(f"{out} holds scores of another configuration ({cfg_path}: "
                                  f"{', '.join(changed)} differ); use a new folder")
-        cfg_path.write_text(json.dumps(config, indent=2) + "\n")
+        write_json_atomic(cfg_path, config)
         jsonl = out / "scores.jsonl"
         done = read_done(jsonl)
     todo = [e for e in images if int(e["index"]) not in done]
@@ -562,8 +561,8 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
         "n_jobs": getattr(executor, "n_jobs", n_jobs),
     })
     if out is not None:
-        (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-        (out / "summary.md").write_text(summary_markdown(summary))
+        write_json_atomic(out / "summary.json", summary)
+        write_text_atomic(out / "summary.md", summary_markdown(summary))
     summary["records"] = records
     return summary
 

@@ -513,3 +513,33 @@ def test_dataset_corrupt_records(tmp_path, capsys, name, content):
     code = main(["dataset", "--scenes", "1", "--candidates", "2", "--out", str(out)])
     one_line_error(capsys, code, "dataset", out / name)
     assert not list(out.rglob("*.png"))  # refused before any scene was rendered
+
+
+@pytest.fixture(scope="module")
+def one_scene_dataset(tmp_path_factory):
+    from graspsim.datagen import make_dataset
+
+    root = tmp_path_factory.mktemp("data") / "ds"
+    make_dataset(n_scenes=1, objects="test", out=root, seed=1, n_candidates=2)
+    return root
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("how", ["garbage", "binary-csv", "columns", "manifest-truncated",
+                                 "manifest-garbage", "config-truncated"])
+def test_score_corrupt_inputs(one_scene_dataset, tmp_path, capsys, how):
+    data = tmp_path / "ds"
+    shutil.copytree(one_scene_dataset, data)
+    pred, out = tmp_path / "p.csv", tmp_path / "s"
+    pred.write_text("image,x,y,theta_deg,w,h\n0000,100,100,0,40,20\n")
+    path = {"manifest-truncated": data / "scenes.json", "manifest-garbage": data / "scenes.json",
+            "config-truncated": out / "config.json"}.get(how, pred)
+    if how == "config-truncated":
+        out.mkdir()
+        path.write_text('{"data": "x", "dataset_finger')
+    else:
+        corrupt(path, {"columns": "0000,1,2\n", "binary-csv": b"\xff\xfe" + GARBAGE,
+                       "manifest-truncated": "truncated",
+                       "manifest-garbage": "garbage"}.get(how, how))
+    code = main(["score", "--data", str(data), "--predictions", str(pred), "--out", str(out)])
+    one_line_error(capsys, code, "score", path)
