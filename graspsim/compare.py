@@ -262,7 +262,7 @@ def load_folder(folder) -> dict:
         (the detector recorded in the configuration, else the folder's name), ``file`` (the
         JSONL path) and ``records`` (dict: trial index (int) or image id (str) -> record).
     """
-    from dlsr.records import read_jsonl
+    from dlsr.records import read_json, read_jsonl
 
     folder = Path(folder)
     if not folder.is_dir():
@@ -270,12 +270,7 @@ def load_folder(folder) -> dict:
     cfg_path = folder / "config.json"
     if not cfg_path.exists():
         raise FileNotFoundError(f"{cfg_path} is missing: {folder} is not a trials or score folder")
-    try:
-        config = json.loads(cfg_path.read_text())
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{cfg_path}: not valid JSON ({exc})") from None
-    if not isinstance(config, dict):
-        raise ValueError(f"{cfg_path}: expected a JSON object")
+    config = read_json(cfg_path, "configuration")
     if "dataset_fingerprint" in config:
         kind, jsonl, key = "scores", folder / "scores.jsonl", "image"
     else:

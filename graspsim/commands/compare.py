@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-from pathlib import Path
 
 
 def register(subparsers) -> None:
@@ -33,9 +31,8 @@ def _run(args: argparse.Namespace) -> int:
     comparisons = compare_folders(args.folders, alpha=args.alpha)
     print("\n\n".join(comparison_text(c) for c in comparisons))
     if args.out is not None:
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps({"alpha": args.alpha, "comparisons": comparisons},
-                                  indent=2) + "\n")
+        from dlsr.records import write_json_atomic
+
+        out = write_json_atomic(args.out, {"alpha": args.alpha, "comparisons": comparisons})
         print(f"written: {out}")
     return 0

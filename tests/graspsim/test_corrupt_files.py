@@ -543,3 +543,23 @@ def test_score_corrupt_inputs(one_scene_dataset, tmp_path, capsys, how):
                        "manifest-garbage": "garbage"}.get(how, how))
     code = main(["score", "--data", str(data), "--predictions", str(pred), "--out", str(out)])
     one_line_error(capsys, code, "score", path)
+
+
+@pytest.mark.parametrize("name, content, where", [
+    ("config.json", '{"detector": "rand', ""),
+    ("config.json", GARBAGE, ""),
+    ("trials.jsonl", BAD_MIDDLE, ":2: "),
+    ("trials.jsonl", GARBAGE, ":1: "),
+])
+def test_compare_corrupt_folders(tmp_path, capsys, name, content, where):
+    folders = []
+    for d in ("a", "b"):
+        f = tmp_path / d
+        f.mkdir()
+        (f / "config.json").write_text(json.dumps({"detector": d, "seed": 0, "objects": "test"}))
+        (f / "trials.jsonl").write_text("".join(
+            json.dumps({"index": i, "success": i % 2 == 0}) + "\n" for i in range(4)))
+        folders.append(f)
+    corrupt(folders[1] / name, content)
+    code = main(["compare", *map(str, folders)])
+    assert f"{name}{where}" in one_line_error(capsys, code, "compare", folders[1] / name)
