@@ -25,8 +25,8 @@ moved kinematically (no physics step), a grasp whose jaws would pass through som
 way in is a ``"collision on approach"`` and one whose way in is clear while the space between
 the open pads holds no object is ``"nothing between the jaws"`` -- both decided with geometric
 margins so that the full execution could not disagree. Every other grasp is executed as above.
-With ``ExecutionParams(hold_until_still=True)`` the 1 s hold ends early once the object has stopped
-moving in the hand.
+With ``ExecutionParams(hold_until_still=True)`` the 1 s hold ends early once the object has
+stopped moving in the hand.
 """
 
 from __future__ import annotations
@@ -59,9 +59,6 @@ SLIPPED = "slipped during lift"
 class ExecutionParams:
     """Motion parameters (metres, seconds, m/s).
 
-    The close ends when the fingers move slower than ``close_speed`` (m/s), after at least
-    0.1 s, or after ``close_time``.
-
     ``hold_until_still`` (off by default) ends the hold early, as a success, once the lifted
     object is at least ``success_height`` up, touches both fingers and has moved less than
     ``still_tolerance`` metres relative to the TCP between ``still_checks`` consecutive checks
@@ -78,7 +75,6 @@ class ExecutionParams:
     tip_clearance: float = 0.003
     arrive_steps: int = 48
     gripper: GripperParams = field(default_factory=GripperParams)
-    close_speed: float = 1e-3
     hold_until_still: bool = False
     still_tolerance: float = 2e-4
     still_checks: int = 2
@@ -211,7 +207,7 @@ def execute_grasp(sim, scene: Scene, bodies: SceneBodies, grasp: Grasp,
     n_close = int(round(p.close_time / sim.time_step))
     for i in range(0, n_close, 6):
         sim.step(6)
-        if i >= 24 and gripper.finger_speed() < p.close_speed:
+        if i >= 24 and gripper.finger_speed() < 1e-3:
             break
     if record is not None:
         frames.append(record("close"))
