@@ -410,9 +410,10 @@ def label_rectangles(sim, scene, frame, candidates, params: ExecutionParams | No
     With ``fast`` (the default), :func:`graspsim.execution.precheck_grasps` first decides the
     obvious collisions and empty closes geometrically in one built scene, and the other grasps
     are executed with ``hold_until_still=True`` (the hold ends once the object is at rest in the
-    hand). ``fast=False`` executes every grasp with ``params`` as given (the reference; the
-    fast path's verdicts were the same on every one of the grasps compared in
-    ``scripts/bench_labelling.py``).
+    hand). ``fast=False`` executes every grasp with ``params`` as given (the reference). The two
+    gave the same verdict (success and failure reason) for every one of 896 grasps compared
+    by ``scripts/bench_labelling.py`` (512 dense and 384 mixed candidates, 8 scenes of the
+    train objects, seed 5).
 
     Parameters
     ----------
