@@ -7,7 +7,7 @@ import pytest
 
 from dlsr.rectangles import GraspRectangle
 from graspsim.camera import DepthNoise
-from graspsim.execution import COLLISION, NOTHING, run_grasp
+from graspsim.execution import COLLISION, NOTHING, ExecutionParams, precheck_grasps, run_grasp
 from graspsim.grasp import TOO_WIDE, rectangle_to_grasp
 from graspsim.objects import ObjectSpec
 from graspsim.scene import PlacedObject, Scene, build_scene, capture, make_scene
@@ -98,6 +98,36 @@ def test_failures_have_their_reasons(sim, box_spec):
     wide = rectangle_to_grasp(box_rect(frame, (1, 0, 0), 0.12), *args)
     res = run_grasp(sim, scene, wide)
     assert res.reason == TOO_WIDE and not res.success and res.steps == 0
+
+
+def test_precheck_decides_only_the_obvious_outcomes(sim, box_spec):
+    scene = box_scene(box_spec)
+    _, frame = frame_of(sim, scene)
+    args = (frame.depth, frame.depth_valid, frame.intrinsics, frame.T_world_cam)
+    grasps = [
+        rectangle_to_grasp(box_rect(frame, (1, 0, 0), 0.02, offset=(0.08, 0.0)), *args),
+        rectangle_to_grasp(box_rect(frame, (0, 1, 0), 0.05), *args),  # pads land on the box
+        rectangle_to_grasp(box_rect(frame, (1, 0, 0), 0.05), *args),  # a good grasp
+        rectangle_to_grasp(box_rect(frame, (1, 0, 0), 0.12), *args),  # too wide
+    ]
+    pre = precheck_grasps(sim, scene, grasps)
+    assert [None if r is None else r.reason for r in pre] == [NOTHING, COLLISION, None, TOO_WIDE]
+    assert all(r.steps == 0 and not r.success for r in pre if r is not None)
+    for g, r in zip(grasps, pre, strict=True):
+        if r is not None:  # the full execution agrees
+            assert run_grasp(sim, scene, g).reason == r.reason
+
+
+def test_hold_until_still_ends_a_firm_grasp_early(sim, box_spec):
+    scene = box_scene(box_spec)
+    _, frame = frame_of(sim, scene)
+    g = rectangle_to_grasp(box_rect(frame, (1, 0, 0), 0.05), frame.depth, frame.depth_valid,
+                           frame.intrinsics, frame.T_world_cam)
+    full = run_grasp(sim, scene, g)
+    early = run_grasp(sim, scene, g, ExecutionParams(hold_until_still=True))
+    assert full.success and early.success
+    assert early.steps < full.steps
+    assert early.lift_height >= 0.10
 
 
 def test_same_seed_and_commands_same_result(box_spec):
