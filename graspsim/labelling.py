@@ -28,6 +28,8 @@ from .gripper import MAX_OPENING
 __all__ = [
     "Labelled",
     "sample_candidates",
+    "SAMPLERS",
+    "check_sampler",
     "dense_candidates",
     "max_width_px",
     "chord",
@@ -158,6 +160,16 @@ def chords(inside, centre, thetas, max_px: float = 120.0) -> tuple[np.ndarray, n
     return ends[1].astype(float), ends[0].astype(float)
 
 
+SAMPLERS = ("mixed", "dense")
+
+
+def check_sampler(mode: str) -> str:
+    """``mode`` if it names a candidate sampler of :func:`sample_candidates`, else ValueError."""
+    if mode not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}, got {mode!r}")
+    return mode
+
+
 def sample_candidates(segmentation, object_ids, rng: np.random.Generator, n: int = 32,
                       jaw_px=(10.0, 28.0), depth=None,
                       mix=(0.35, 0.35, 0.30), mode: str = "mixed", intrinsics=None,
@@ -201,11 +213,9 @@ def sample_candidates(segmentation, object_ids, rng: np.random.Generator, n: int
     list of GraspRectangle
         Empty when no object is visible.
     """
-    if mode == "dense":
+    if check_sampler(mode) == "dense":
         return dense_candidates(segmentation, object_ids, rng, depth, intrinsics, n=n,
                                 jaw_px=jaw_px, max_opening=max_opening, spacing=spacing)
-    if mode != "mixed":
-        raise ValueError(f"mode must be 'mixed' or 'dense', got {mode!r}")
     seg = np.asarray(segmentation)
     masks = [(seg == b) for b in object_ids]
     masks = [m for m in masks if m.sum() >= 5]

@@ -48,6 +48,10 @@ class RunConfig:
         Synthetic Cornell images generated from the train objects.
     candidates : int
         Rectangles labelled by physics per scene.
+    label_sampler : {"mixed", "dense"}
+        How the labelled candidates of the dataset and the trial scenes are drawn
+        (:func:`graspsim.labelling.sample_candidates`; ``"dense"``: a Jacquard-like lattice
+        with ``candidates`` / ``trial_candidates`` as its budget).
     learner, encoder : str
         The DLSR combination (default NKM-Natural: the paper's best image-wise detector, and
         the cheapest to encode: k-means triangle activations are one matrix product).
@@ -87,6 +91,7 @@ class RunConfig:
     seed: int = 0
     scenes: int = 60
     candidates: int = 48
+    label_sampler: str = "mixed"
     learner: str = "NKM"
     encoder: str = "Natural"
     n_atoms: int = 200
@@ -122,6 +127,9 @@ class RunConfig:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         check_training_options(self.fit_grid, self.hard_negatives, self.hard_rounds)
+        from .labelling import check_sampler
+
+        check_sampler(self.label_sampler)
         self._check_baselines()
         if self.scenes < self.folds:
             raise ValueError(f"{self.folds} folds need at least {self.folds} scenes")
@@ -319,7 +327,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         t0 = time.perf_counter()
         stats = make_dataset(n_scenes=config.scenes, objects="train", out=root / "dataset",
                              seed=seeds["dataset"], n_candidates=config.candidates,
-                             executor=ex)
+                             sampler=config.label_sampler, executor=ex)
         stats["seconds"] = time.perf_counter() - t0
         stages.finish("dataset", stats)
     from dlsr.datasets import load_cornell
@@ -409,7 +417,7 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
     """
     from .trials import TrialConfig, run_trials
 
-    trial_cfg = TrialConfig(n_candidates=config.trial_candidates)
+    trial_cfg = TrialConfig(n_candidates=config.trial_candidates, sampler=config.label_sampler)
     for name in ["dlsr", *config.baselines]:
         key = f"trials/{name}"
         if stages.done(key):

@@ -89,11 +89,15 @@ class TrialConfig:
     label_with_clean_depth : bool
         Turn labelling candidates into poses with the noise-free depth (ground truth
         independent of sensor dropout) instead of the observed depth.
+    sampler : {"mixed", "dense"}
+        How labelling candidates are drawn (:func:`graspsim.labelling.sample_candidates`;
+        ``"dense"`` takes ``n_candidates`` as its budget).
     """
 
     n_candidates: int = 32
     n_objects: int = 1
     label_with_clean_depth: bool = False
+    sampler: str = "mixed"
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -204,7 +208,8 @@ def _label_scene(sim, scene, frame, bodies, rng, detector, config, params):
     """Physics labels of the observed scene: ``(positives or None, n_labelled)``."""
     if config.n_candidates > 0:
         cands = sample_candidates(frame.segmentation, bodies.objects, rng,
-                                  config.n_candidates, depth=frame.depth_clean)
+                                  config.n_candidates, depth=frame.depth_clean,
+                                  mode=config.sampler, intrinsics=frame.intrinsics)
         kw = {}
         if config.label_with_clean_depth:
             kw = {"depth": frame.depth_clean, "depth_valid": frame.depth_clean > 0}
@@ -357,6 +362,9 @@ def _open_campaign(out, meta: dict, filename: str):
     cfg_path = out / "config.json"
     if cfg_path.exists():
         old = read_json(cfg_path, "trials configuration")
+        if isinstance(old.get("config"), dict):
+            # A folder written before a TrialConfig field existed ran with its default.
+            old["config"] = {**asdict(TrialConfig()), **old["config"]}
         if {k: old.get(k) for k in meta} != json.loads(json.dumps(meta)):
             raise ValueError(
                 f"{out} holds trials of another configuration ({cfg_path}); use a new folder"

@@ -16,6 +16,9 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, help="dataset root folder")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--candidates", type=int, default=48, help="rectangles labelled per scene")
+    p.add_argument("--sampler", default="mixed", choices=["mixed", "dense"],
+                   help="labelling candidates: mixed (centroid, chord, random) or dense "
+                        "(Jacquard-like lattice, every 15 deg; --candidates is its budget)")
     p.add_argument("--objects-per-scene", type=int, default=1)
     add_executor_args(p)
     p.set_defaults(func=_run)
@@ -26,6 +29,7 @@ def _run(args: argparse.Namespace) -> int:
 
     s = make_dataset(n_scenes=args.scenes, objects=args.objects, out=args.out, seed=args.seed,
                      n_candidates=args.candidates, n_objects=args.objects_per_scene,
+                     sampler=args.sampler,
                      executor=executor_from_args(args))
     print(f"wrote {s['images']} images ({s['positives']} positives, {s['negatives']} negatives) "
           f"to {args.out}; manifest {s['manifest']} (sha256 {s['fingerprint'][:12]}...)")

@@ -28,6 +28,9 @@ def register(subparsers) -> None:
     p.add_argument("--candidates", type=int, default=32,
                    help="rectangles executed to label each scene (0: no labels, no metric); "
                         "with --declutter every observation of a round is labelled")
+    p.add_argument("--sampler", default="mixed", choices=["mixed", "dense"],
+                   help="labelling candidates: mixed (centroid, chord, random) or dense "
+                        "(Jacquard-like lattice, every 15 deg; --candidates is its budget)")
     p.add_argument("--objects-per-scene", type=int, default=None,
                    help="1: Cornell-like (default); >1 clutter (default 5 with --declutter)")
     p.add_argument("--declutter", action="store_true",
@@ -47,7 +50,7 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--objects-per-scene must be >= 1, got {k}")
     if args.n < 0:
         raise ValueError(f"--n must be >= 0, got {args.n}")
-    config = TrialConfig(n_candidates=args.candidates, n_objects=k)
+    config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler)
     executor = executor_from_args(args)
     kwargs = dict(detector=args.detector, objects=args.objects, n=args.n, seed=args.seed,
                   out=args.out, n_jobs=args.jobs, progress=True, config=config,

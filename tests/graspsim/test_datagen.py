@@ -121,3 +121,23 @@ def test_patches_take_an_executor(tmp_path, easy_objects):
     (Pa, Ma), (Pb, Mb) = load_patch_file(tmp_path / "a.npz"), load_patch_file(tmp_path / "b.npz")
     np.testing.assert_array_equal(Pa, Pb)
     np.testing.assert_array_equal(Ma, Mb)
+
+
+def test_dense_sampler_labels_the_lattice_and_is_recorded(tmp_path, easy_objects):
+    root = tmp_path / "dense"
+    stats = make_dataset(n_scenes=1, objects=easy_objects[:1], out=root, seed=4,
+                         n_candidates=24, sampler="dense")
+    manifest = json.loads((root / MANIFEST).read_text())
+    assert manifest["generator"]["sampler"] == "dense"
+    assert json.loads((root / "dataset_config.json").read_text())["sampler"] == "dense"
+    (sample,) = load_cornell(root)
+    rects = [*sample.positives, *sample.negatives]
+    assert stats["positives"] + stats["negatives"] == len(rects) <= 24
+    # the lattice's closing directions are multiples of 15 degrees
+    deg = np.degrees([r.theta for r in rects])
+    np.testing.assert_allclose(deg / 15, np.round(deg / 15), atol=1e-4)
+    # a resume with another sampler is another configuration
+    with pytest.raises(ValueError, match="another configuration"):
+        make_dataset(n_scenes=1, objects=easy_objects[:1], out=root, seed=4, n_candidates=24)
+    with pytest.raises(ValueError, match="sampler must be one of"):
+        make_dataset(n_scenes=1, objects=easy_objects[:1], out=tmp_path / "x", sampler="grid")

@@ -186,3 +186,24 @@ def test_ray_backend_gives_the_records_of_loky(easy_objects):
                       executor=Executor("ray", n_jobs=2, progress=False))
     assert strip(ray_["records"]) == strip(loky["records"])
     assert [r["index"] for r in ray_["records"]] == [0, 1, 2]
+
+
+def test_dense_sampler_in_trials_and_old_config_folders_resume(tmp_path, easy_objects):
+    out = tmp_path / "t"
+    s = run_trials("oracle", objects=easy_objects, n=1, seed=3, out=out,
+                   config=TrialConfig(n_candidates=24, sampler="dense"))
+    assert s["records"][0]["n_labelled"] <= 24
+    assert json.loads((out / "config.json").read_text())["config"]["sampler"] == "dense"
+    with pytest.raises(ValueError, match="another configuration"):
+        run_trials("oracle", objects=easy_objects, n=1, seed=3, out=out,
+                   config=TrialConfig(n_candidates=24))
+    # a folder written before the sampler existed ran the mixed sampler: it resumes
+    old = tmp_path / "old"
+    run_trials("random", objects=easy_objects, n=1, seed=3, out=old,
+               config=TrialConfig(n_candidates=0))
+    cfg = json.loads((old / "config.json").read_text())
+    del cfg["config"]["sampler"]
+    (old / "config.json").write_text(json.dumps(cfg))
+    again = run_trials("random", objects=easy_objects, n=2, seed=3, out=old,
+                       config=TrialConfig(n_candidates=0))
+    assert again["n"] == 2
