@@ -163,10 +163,11 @@ def chords(inside, centre, thetas, max_px: float = 120.0) -> tuple[np.ndarray, n
 SAMPLERS = ("mixed", "dense")
 
 
-def check_sampler(mode: str) -> str:
-    """``mode`` if it names a candidate sampler of :func:`sample_candidates`, else ValueError."""
+def check_sampler(mode: str, name: str = "sampler") -> str:
+    """``mode`` if it names a candidate sampler of :func:`sample_candidates`, else a ValueError
+    naming the setting (``name``)."""
     if mode not in SAMPLERS:
-        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)}, got {mode!r}")
+        raise ValueError(f"{name} must be one of {', '.join(SAMPLERS)}, got {mode!r}")
     return mode
 
 
@@ -213,7 +214,7 @@ def sample_candidates(segmentation, object_ids, rng: np.random.Generator, n: int
     list of GraspRectangle
         Empty when no object is visible.
     """
-    if check_sampler(mode) == "dense":
+    if check_sampler(mode, "mode") == "dense":
         return dense_candidates(segmentation, object_ids, rng, depth, intrinsics, n=n,
                                 jaw_px=jaw_px, max_opening=max_opening, spacing=spacing)
     seg = np.asarray(segmentation)
