@@ -6,6 +6,7 @@ method and where it differs from :class:`~dlsr.detection.exact.ExactGridDetector
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 import threading
@@ -19,7 +20,7 @@ from ..features import encode_patches
 from ..preprocess import _one_blas_thread
 from ..rectangles import corners_from_array, normalize_angle
 from .exact import Detection, _Base, _check_obs, _empty
-from .grid import COARSE_GRID, PAPER_GRID, SearchGrid, _axes, _box_sums
+from .grid import COARSE_GRID, PAPER_GRID, SearchGrid, _axes, _box_sums, jaws_clear
 from .model import GRID, PATCH, PATCHES_PER_RECTANGLE, SIZE, SPLIT
 
 _ONE = 1.0 - 1e-6  # as dlsr.preprocess: bilinear weights summing to one
@@ -329,10 +330,11 @@ class DenseDetector(_Base):
         t0 = time.perf_counter()
         _check_obs(obs)
         stats = _new_stats()
-        if self.coarse_to_fine:
-            cand, reason = self.candidates(obs, self.coarse_grid)
+        if self.coarse_to_fine:  # the coarse stage keeps the grid's jaw clearance
+            coarse = dataclasses.replace(self.coarse_grid, clear_jaws=self.grid.clear_jaws)
+            cand, reason, region = self._candidates(obs, coarse)
         else:
-            cand, reason = self.candidates(obs)
+            cand, reason, region = self._candidates(obs)
         if reason:
             return _empty(reason, t0)
         t1, c1 = time.perf_counter(), time.process_time()
@@ -343,7 +345,7 @@ class DenseDetector(_Base):
             n_scored = len(cand)
             if self.coarse_to_fine:
                 seeds = cand[np.argsort(-scores, kind="stable")[: self.refine_top]]
-                fine = self._neighbourhood(obs, seeds)
+                fine = self._neighbourhood(obs, seeds, region)
                 if len(fine):  # the seeds are in it: rank the fine (stride-1) scores only
                     scores = self._dense_scores(src, fine, stats, pool, 1)
                     cand = fine
@@ -455,7 +457,7 @@ class DenseDetector(_Base):
                   + S[:, SPLIT:, :SPLIT, 2].sum((1, 2)) + S[:, SPLIT:, SPLIT:, 3].sum((1, 2)))
         return pooled + const
 
-    def _neighbourhood(self, obs, seeds):
+    def _neighbourhood(self, obs, seeds, region=None):
         g = self.grid
         angles = np.radians(np.asarray(g.angles_deg, float))
         da = np.radians(np.min(np.diff(np.sort(np.asarray(g.angles_deg, float))))) \
@@ -483,7 +485,10 @@ class DenseDetector(_Base):
         corners = corners_from_array(fine)
         inside = ((corners[..., 0] >= 0) & (corners[..., 0] <= W - 1)
                   & (corners[..., 1] >= 0) & (corners[..., 1] <= H - 1)).all(axis=1)
-        return fine[inside]
+        fine = fine[inside]
+        if g.clear_jaws and region is not None:
+            fine = fine[jaws_clear(region, fine)]
+        return fine
 
     def _padding_code_scores(self, V):
         """``V[:, q] . code(all-masked patch)`` per quadrant (the exact path's padding)."""

@@ -78,20 +78,28 @@ class _Base:
 
     def candidates(self, obs, grid: SearchGrid | None = None):
         """``(candidates (n, 5), reason or None)`` for an observation."""
+        cand, reason, _ = self._candidates(obs, grid)
+        return cand, reason
+
+    def _candidates(self, obs, grid: SearchGrid | None = None):
+        """``(candidates, reason or None, object region or None)``."""
         _check_obs(obs)
         depth = np.asarray(obs["depth"])
         valid = np.isfinite(depth) & (depth > 0)
         if obs.get("depth_valid") is not None:
             valid &= np.asarray(obs["depth_valid"], dtype=bool)
         if not valid.any():
-            return np.zeros((0, 5)), "the depth image has no valid pixel (all masked)"
+            return np.zeros((0, 5)), "the depth image has no valid pixel (all masked)", None
         region, how = object_region(obs, self.background, self.region, self.min_height)
         if not region.any():
-            return np.zeros((0, 5)), f"empty object region (method {how})"
-        cand = enumerate_candidates(region, grid or self.grid)
+            return np.zeros((0, 5)), f"empty object region (method {how})", region
+        grid = grid or self.grid
+        cand = enumerate_candidates(region, grid)
         if len(cand) == 0:
-            return cand, f"no candidate covers the object region enough (method {how})"
-        return cand, None
+            what = " with both jaws clear of it" if grid.clear_jaws else ""
+            return cand, (f"no candidate covers the object region enough{what} "
+                          f"(method {how})"), region
+        return cand, None, region
 
     def predict(self, obs) -> list[GraspRectangle]:
         """The top-k rectangles, best first (empty, with a logged reason, when none)."""

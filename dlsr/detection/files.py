@@ -6,6 +6,7 @@ Part of :mod:`dlsr.detection`.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,8 @@ from .model import DLSRDetector
 
 
 def detect_files(model, rgb, depth, mask=None, background=None, depth_units: float = 1.0,
-                 detector: str | None = None, top_k: int = 5, out=None, **options):
+                 detector: str | None = None, top_k: int = 5, out=None,
+                 clear_jaws: bool | None = None, **options):
     """Detect grasps in one RGB-D image read from files (the ``graspsim detect`` command).
 
     Parameters
@@ -26,15 +28,23 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
         Colour image (PNG, ...).
     depth : path
         Depth image (float TIFF in metres, or ``.npy``); values <= 0 or non-finite are missing.
+        Cornell's ``pcdXXXXd.tiff`` are metres (the distance to the camera, 0.76 to 2.03 m in
+        the two sample images).
     mask, background : path or None
-        Object mask (non-zero = object) or background image for the object region.
+        Object mask (non-zero = object) or background image for the object region. With
+        neither, the object is found from depth alone (:func:`~dlsr.detection.table_plane_mask`).
     depth_units : float
-        Multiplies the depth file's values to give metres (e.g. 0.001 for millimetres).
+        Multiplies the depth file's values to give metres (e.g. 0.001 for millimetres). A
+        median valid depth outside 0.05 to 20 m after it is an error naming the file (wrong
+        units would silently break the table fit, whose thresholds are in metres).
     detector : {"dense", "exact"} or None
         None: the model's saved choice.
     top_k : int
     out : path or None
         Overlay PNG with the detections (best drawn last).
+    clear_jaws : bool or None
+        Override the model's ``SearchGrid.clear_jaws`` (only candidates whose jaws come down
+        beside the object); None keeps the model's saved grid.
     **options :
         Passed to the detector (``coarse_to_fine``, ``rescore``, ``region``).
 
@@ -52,10 +62,19 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
         raise ValueError(f"depth {depth} has shape {d.shape}, the image {rgb} "
                          f"{rgb_arr.shape[:2]}")
     obs = {"rgb": rgb_arr, "depth": d * np.float32(depth_units), "depth_valid": valid}
+    if valid.any():
+        median = float(np.median(obs["depth"][valid]))
+        if not 0.05 <= median <= 20.0:
+            raise ValueError(f"depth {depth}: median valid depth {median:.4g} m after "
+                             f"--depth-units {depth_units:g} is not a camera's range (0.05 to "
+                             "20 m); millimetres need --depth-units 0.001")
     if mask is not None:
         obs["mask"] = read_gray(mask) > 0
     bg = None if background is None else read_rgb(background)
-    det = model.detector(detector, top_k=top_k, background=bg, **options).detect(obs)
+    search = model.detector(detector, top_k=top_k, background=bg, **options)
+    if clear_jaws is not None:
+        search.grid = dataclasses.replace(search.grid, clear_jaws=bool(clear_jaws))
+    det = search.detect(obs)
     if out is not None:
         from PIL import Image
 

@@ -7,6 +7,7 @@ Part of :mod:`dlsr.detection`.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 
@@ -240,9 +241,8 @@ def fit_search_grid(positives, grid: SearchGrid = PAPER_GRID,
             kept = v[[np.argmin(np.abs(v - np.median(x)))]]
         return tuple(float(a) for a in kept)
 
-    fitted = SearchGrid(angles_deg=grid.angles_deg, openings=keep(grid.openings, pos[:, 3]),
-                        jaws=keep(grid.jaws, pos[:, 4]), step=grid.step, dilate=grid.dilate,
-                        min_coverage=grid.min_coverage, coverage_on=grid.coverage_on)
+    fitted = dataclasses.replace(grid, openings=keep(grid.openings, pos[:, 3]),
+                                 jaws=keep(grid.jaws, pos[:, 4]))
     if not fitted.pairs():
         raise ValueError(f"fitted grid has no opening >= jaw size (openings {fitted.openings}, "
                          f"jaws {fitted.jaws})")

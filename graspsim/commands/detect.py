@@ -27,6 +27,9 @@ def register(subparsers) -> None:
     p.add_argument("--detector", choices=["dense", "exact"], default=None,
                    help="default: the model's saved choice (dense)")
     p.add_argument("--coarse-to-fine", action="store_true")
+    p.add_argument("--clear-jaws", action=argparse.BooleanOptionalAction, default=None,
+                   help="only rectangles whose jaws come down beside the object, centred on "
+                   "it (default: the model's saved grid; off in the paper's)")
     p.add_argument("--top-k", type=int, default=5)
     p.add_argument("--out", default=None, help="overlay PNG (best in red/blue, others in "
                    "yellow/grey)")
@@ -39,7 +42,8 @@ def _run(args: argparse.Namespace) -> int:
     options = {"coarse_to_fine": True} if args.coarse_to_fine else {}
     det = detect_files(args.model, args.rgb, args.depth, mask=args.mask,
                        background=args.background, depth_units=args.depth_units,
-                       detector=args.detector, top_k=args.top_k, out=args.out, **options)
+                       detector=args.detector, top_k=args.top_k, out=args.out,
+                       clear_jaws=args.clear_jaws, **options)
     print(json.dumps({
         "rectangles": [dict(zip(("x", "y", "theta", "w", "h"), map(float, r), strict=True))
                        for r in det.rects],

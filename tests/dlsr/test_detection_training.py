@@ -161,9 +161,10 @@ def test_fit_search_grid_keeps_the_sizes_of_the_positives():
     assert g.openings == (20.0, 30.0, 40.0, 50.0, 60.0, 70.0)  # 22..68 widened by 5 px
     assert g.jaws == (10.0, 20.0, 30.0)
     # everything but the sizes is the base grid's
-    assert (g.angles_deg, g.step, g.dilate, g.min_coverage, g.coverage_on) == (
+    assert (g.angles_deg, g.step, g.dilate, g.min_coverage, g.coverage_on, g.clear_jaws) == (
         PAPER_GRID.angles_deg, PAPER_GRID.step, PAPER_GRID.dilate, PAPER_GRID.min_coverage,
-        PAPER_GRID.coverage_on)
+        PAPER_GRID.coverage_on, PAPER_GRID.clear_jaws)
+    assert fit_search_grid(pos, SearchGrid(clear_jaws=True), 0.0).clear_jaws
     # a few outliers do not widen the range at the default quantile ...
     out = np.array([[50, 50, 0.0, 8.0, 8.0]] * 4 + [[50, 50, 0.0, 90.0, 60.0]] * 4)
     g2 = fit_search_grid(np.concatenate([pos, out]))
