@@ -13,12 +13,16 @@ Conventions
 The grasp centre is the rectangle centre back-projected at a robust depth -- the median of the
 valid depth in the rectangle's central region (the rectangle shrunk to half its opening and half
 its jaw size) -- pushed ``depth_offset`` further along the approach so the pads straddle the
-object's top rather than touch it. The opening is ``w z / f`` (the rectangle's opening measured
-at that depth) plus ``margin``. When the central region holds no valid depth at all, the fallback
-is explicit: no pose is computed and the grasp carries the failure reason
-``"depth missing at the centre"``; when ``w z / f`` exceeds the gripper's largest opening, the
-pose is computed but the reason is ``"too wide for the gripper"``. Executors do not run a grasp
-that carries a failure reason.
+object's top rather than touch it, but never so deep that the palm, ``PALM_OFFSET`` (4 cm)
+behind the grasp centre, comes within ``palm_clearance`` of the nearest surface seen anywhere in
+the rectangle (:func:`nearest_depth`, a low percentile of its valid depth, robust to a few noisy
+pixels): over an open mug or an upright bottle's shoulder the median lies far below the rim or
+the cap, and a gripper with 5 cm fingers cannot reach that deep around them. The opening is
+``w z / f`` (the rectangle's opening measured at that depth) plus ``margin``. When the central
+region holds no valid depth at all, the fallback is explicit: no pose is computed and the grasp
+carries the failure reason ``"depth missing at the centre"``; when ``w z / f`` exceeds the
+gripper's largest opening, the pose is computed but the reason is ``"too wide for the gripper"``.
+Executors do not run a grasp that carries a failure reason.
 """
 
 from __future__ import annotations
@@ -29,10 +33,13 @@ import numpy as np
 
 from dlsr.rectangles import GraspRectangle
 
+from .gripper import PALM_OFFSET
+
 __all__ = [
     "Grasp",
     "rectangle_to_grasp",
     "central_depth",
+    "nearest_depth",
     "DEPTH_MISSING",
     "TOO_WIDE",
 ]
@@ -97,6 +104,31 @@ def _intrinsic_matrix(intrinsics) -> np.ndarray:
     return K
 
 
+def _region_depths(rect: GraspRectangle, depth, valid, fraction: float) -> np.ndarray:
+    """Valid depths (metres, 1-D) inside the rectangle scaled by ``fraction`` about its centre
+    (at least the centre pixel is always included)."""
+    depth = np.asarray(depth)
+    valid = np.asarray(valid, dtype=bool)
+    if depth.shape != valid.shape or depth.ndim != 2:
+        raise ValueError(f"depth {depth.shape} and valid {valid.shape} must be the same (H, W)")
+    H, W = depth.shape
+    half_u = max(rect.w * fraction / 2, 0.5)
+    half_v = max(rect.h * fraction / 2, 0.5)
+    r = int(np.ceil(np.hypot(half_u, half_v))) + 1
+    x0, x1 = max(int(np.floor(rect.x)) - r, 0), min(int(np.ceil(rect.x)) + r + 1, W)
+    y0, y1 = max(int(np.floor(rect.y)) - r, 0), min(int(np.ceil(rect.y)) + r + 1, H)
+    if x0 >= x1 or y0 >= y1:
+        return np.empty(0, dtype=float)
+    ys, xs = np.mgrid[y0:y1, x0:x1]
+    dx, dy = xs - rect.x, ys - rect.y
+    c, s = np.cos(rect.theta), np.sin(rect.theta)
+    along = dx * c - dy * s  # image closing direction is (cos, -sin) in (x, y)
+    across = dx * s + dy * c
+    inside = (np.abs(along) <= half_u) & (np.abs(across) <= half_v)
+    sel = inside & valid[y0:y1, x0:x1] & (depth[y0:y1, x0:x1] > 0)
+    return depth[y0:y1, x0:x1][sel].astype(float)
+
+
 def central_depth(rect: GraspRectangle, depth, valid, fraction: float = 0.5) -> float:
     """Median valid depth inside the rectangle's central region.
 
@@ -115,28 +147,32 @@ def central_depth(rect: GraspRectangle, depth, valid, fraction: float = 0.5) -> 
     float
         Metres; ``nan`` when the region has no valid pixel.
     """
-    depth = np.asarray(depth)
-    valid = np.asarray(valid, dtype=bool)
-    if depth.shape != valid.shape or depth.ndim != 2:
-        raise ValueError(f"depth {depth.shape} and valid {valid.shape} must be the same (H, W)")
-    H, W = depth.shape
-    half_u = max(rect.w * fraction / 2, 0.5)
-    half_v = max(rect.h * fraction / 2, 0.5)
-    r = int(np.ceil(np.hypot(half_u, half_v))) + 1
-    x0, x1 = max(int(np.floor(rect.x)) - r, 0), min(int(np.ceil(rect.x)) + r + 1, W)
-    y0, y1 = max(int(np.floor(rect.y)) - r, 0), min(int(np.ceil(rect.y)) + r + 1, H)
-    if x0 >= x1 or y0 >= y1:
-        return float("nan")
-    ys, xs = np.mgrid[y0:y1, x0:x1]
-    dx, dy = xs - rect.x, ys - rect.y
-    c, s = np.cos(rect.theta), np.sin(rect.theta)
-    along = dx * c - dy * s  # image closing direction is (cos, -sin) in (x, y)
-    across = dx * s + dy * c
-    inside = (np.abs(along) <= half_u) & (np.abs(across) <= half_v)
-    sel = inside & valid[y0:y1, x0:x1] & (depth[y0:y1, x0:x1] > 0)
-    if not sel.any():
-        return float("nan")
-    return float(np.median(depth[y0:y1, x0:x1][sel]))
+    d = _region_depths(rect, depth, valid, fraction)
+    return float(np.median(d)) if d.size else float("nan")
+
+
+def nearest_depth(rect: GraspRectangle, depth, valid, percentile: float = 5.0) -> float:
+    """The nearest surface seen in the whole rectangle: a low percentile of its valid depth.
+
+    Parameters
+    ----------
+    rect : GraspRectangle
+    depth : ndarray of shape (H, W), float
+        Metres.
+    valid : ndarray of shape (H, W), bool
+    percentile : float
+        In [0, 100]; a few percent ignores isolated noisy pixels but keeps a rim or a cap that
+        covers a small part of the rectangle.
+
+    Returns
+    -------
+    float
+        Metres; ``nan`` when the rectangle has no valid pixel.
+    """
+    if not 0.0 <= percentile <= 100.0:
+        raise ValueError(f"percentile must be in [0, 100], got {percentile}")
+    d = _region_depths(rect, depth, valid, 1.0)
+    return float(np.percentile(d, percentile)) if d.size else float("nan")
 
 
 def rectangle_to_grasp(
@@ -148,6 +184,7 @@ def rectangle_to_grasp(
     depth_offset: float = 0.015,
     margin: float = 0.01,
     max_opening: float = 0.08,
+    palm_clearance: float = 0.005,
 ) -> Grasp:
     """Turn an image rectangle into a gripper pose.
 
@@ -162,11 +199,15 @@ def rectangle_to_grasp(
         Anything with a ``K`` attribute, or ``K`` itself.
     T_world_cam : ndarray of shape (4, 4)
     depth_offset : float
-        Metres the grasp centre lies beyond the surface, along the approach.
+        Metres the grasp centre lies beyond the surface, along the approach (less where the palm
+        would come within ``palm_clearance`` of the nearest surface in the rectangle).
     margin : float
         Metres added to the measured width for the commanded opening.
     max_opening : float
         Metres; the gripper's largest opening.
+    palm_clearance : float
+        Metres the palm (``PALM_OFFSET`` behind the grasp centre) stays short of the nearest
+        surface in the rectangle (:func:`nearest_depth`).
 
     Returns
     -------
@@ -194,7 +235,9 @@ def rectangle_to_grasp(
     p_cam = z * np.array([(rect.x - cx) / fx, (rect.y - cy) / fy, 1.0])
     T_cam_grasp = np.eye(4)
     T_cam_grasp[:3, 0], T_cam_grasp[:3, 1], T_cam_grasp[:3, 2] = x_cam, y_cam, z_cam
-    T_cam_grasp[:3, 3] = p_cam + depth_offset * z_cam
+    # As deep as asked, but the palm stays clear of the nearest surface between the jaws.
+    reach = min(depth_offset, nearest_depth(rect, depth, valid) + PALM_OFFSET - palm_clearance - z)
+    T_cam_grasp[:3, 3] = p_cam + reach * z_cam
     T_world_grasp = T_world_cam @ T_cam_grasp
     opening = float(min(width + margin, max_opening))
     failure = TOO_WIDE if width > max_opening else None

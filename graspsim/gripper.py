@@ -23,6 +23,7 @@ __all__ = ["Gripper", "GripperParams", "gripper_urdf", "pose_from_matrix", "matr
 
 MAX_OPENING = 0.08  #: m, largest opening between the pads.
 TIP_OFFSET = 0.01  #: m, fingertips lie this far beyond the TCP along the approach (+z).
+PALM_OFFSET = 0.04  #: m, the palm's face lies this far behind the TCP (5 cm pads minus the tips).
 
 
 def gripper_urdf():

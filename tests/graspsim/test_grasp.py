@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from dlsr.rectangles import GraspRectangle
-from graspsim.grasp import DEPTH_MISSING, TOO_WIDE, central_depth, rectangle_to_grasp
+from graspsim.grasp import (
+    DEPTH_MISSING,
+    TOO_WIDE,
+    central_depth,
+    nearest_depth,
+    rectangle_to_grasp,
+)
+from graspsim.gripper import PALM_OFFSET
 
 F, CX, CY = 550.0, 319.5, 239.5
 K = np.array([[F, 0, CX], [0, F, CY], [0, 0, 1.0]])
@@ -132,3 +139,41 @@ def test_inputs_are_not_mutated_and_bad_shapes_raise():
         rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid, K, np.eye(3))
     with pytest.raises(ValueError, match="same"):
         rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid[:10], K, T)
+
+
+def cup(rim_depth=0.60, inner_depth=0.68, rim_px=(20, 28)):
+    """An open cup seen from above: a rim ring between ``rim_px`` radii, a deep cavity inside."""
+    depth, valid = flat(0.75)  # the table
+    yy, xx = np.mgrid[0:480, 0:640]
+    r = np.hypot(xx - CX, yy - CY)
+    depth[r < rim_px[1]] = rim_depth
+    depth[r < rim_px[0]] = inner_depth
+    return depth, valid
+
+
+def test_grasp_over_a_deep_cavity_keeps_the_palm_clear_of_the_rim():
+    depth, valid = cup()
+    rect = GraspRectangle(CX, CY, 0.0, 60.0, 20.0)  # jaws outside the rim, centre over the hole
+    g = rectangle_to_grasp(rect, depth, valid, K, look_down(0.75), palm_clearance=0.005)
+    assert g.failure is None
+    assert g.depth == pytest.approx(0.68)  # the surface under the centre is the cup's bottom
+    # Camera looks straight down from 0.75 m: the centre's camera depth is 0.75 - world z.
+    centre_depth = 0.75 - g.position[2]
+    assert centre_depth == pytest.approx(0.60 + PALM_OFFSET - 0.005, abs=1e-6)
+    assert centre_depth < 0.68 + 0.015  # shallower than depth_offset alone would put it
+    # A shallow cavity leaves the requested depth offset untouched.
+    depth2, valid2 = cup(inner_depth=0.61)
+    g2 = rectangle_to_grasp(rect, depth2, valid2, K, look_down(0.75))
+    assert 0.75 - g2.position[2] == pytest.approx(0.61 + 0.015, abs=1e-6)
+
+
+def test_nearest_depth_ignores_a_few_noisy_pixels_but_not_a_rim():
+    depth, valid = flat(0.7)
+    rect = GraspRectangle(CX, CY, 0.0, 60.0, 20.0)
+    depth[240, 320] = 0.2  # one flying pixel
+    assert nearest_depth(rect, depth, valid) == pytest.approx(0.7)
+    depth[230:250, 290:296] = 0.65  # a 6 px wide wall across the band (10 % of the rectangle)
+    assert nearest_depth(rect, depth, valid) == pytest.approx(0.65)
+    assert np.isnan(nearest_depth(rect, depth, np.zeros_like(valid)))
+    with pytest.raises(ValueError, match="percentile"):
+        nearest_depth(rect, depth, valid, percentile=101.0)
