@@ -146,6 +146,46 @@ def _detect_one(det, s, baselines, seed, base: dict) -> dict:
     return rec_
 
 
+def mcnemar_exact(a, b) -> dict:
+    """Exact McNemar test of two paired per-image outcomes (two-sided binomial on discordants).
+
+    Parameters
+    ----------
+    a, b : array-like of bool, shape (n,)
+        Per-image success of two methods on the same images, in the same order.
+
+    Returns
+    -------
+    dict
+        ``n`` images, ``a_only`` and ``b_only`` (images one method wins alone), the accuracies
+        ``a`` and ``b``, and ``p_value`` of :func:`scipy.stats.binomtest` (``a_only`` out of
+        the discordant pairs, p = 1/2); 1.0 when there is no discordant pair.
+    """
+    from scipy.stats import binomtest
+
+    a = np.asarray(a, dtype=bool)
+    b = np.asarray(b, dtype=bool)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"paired outcomes must be two 1-d arrays of one length, got {a.shape} "
+                         f"and {b.shape}")
+    a_only, b_only = int(np.sum(a & ~b)), int(np.sum(b & ~a))
+    p = binomtest(a_only, a_only + b_only, 0.5).pvalue if a_only + b_only else 1.0
+    return {"n": int(len(a)), "a": float(a.mean()) if len(a) else None,
+            "b": float(b.mean()) if len(b) else None, "a_only": a_only, "b_only": b_only,
+            "p_value": float(p)}
+
+
+def _file_digest(*paths) -> str:
+    import hashlib
+
+    h = hashlib.sha1()
+    for p in paths:
+        with open(p, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()[:12]
+
+
 def detection_benchmark(
     data, format: str, out, scale=None, mapping=None, split: str = "object",
     learner: str = "NKM", encoder: str = "Natural", encoder_param=None, C: float | None = None,
@@ -154,7 +194,9 @@ def detection_benchmark(
     hard_negatives: int = 0, hard_rounds: int = 1,
     region: str = "auto", rescore: int = 300,
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
-    save_model=None, seed: int = 0, progress: bool = True, executor=None,
+    save_model=None, extra_patches=None, extra_train=None, extra_format: str | None = None,
+    extra_scale=None, extra_mapping=None, model=None, seed: int = 0, progress: bool = True,
+    executor=None,
 ) -> dict:
     """Cross-validated detection accuracy by the rectangle metric (the paper's Table 2).
 
@@ -171,9 +213,23 @@ def detection_benchmark(
     Results are appended per test image to ``out/results.jsonl`` and a rerun with the same
     configuration skips finished images and reuses saved fold models.
 
+    ``extra_patches`` (a patch file, :func:`dlsr.patches.load_patch_file`) joins unlabelled
+    patches to each fold's whitening and dictionary learning only (self-taught learning, the
+    paper's Table 3); the labelled training rectangles are unchanged. ``extra_train`` (a
+    dataset folder in ``extra_format``, default ``format``, resized by ``extra_scale``, default
+    that format's) adds its labelled images to every training fold, never to a test fold
+    (for example synthetic images beside real ones).
+
+    With ``model`` (a saved :class:`dlsr.detection.DLSRDetector`, ``PATH`` of ``PATH.npz`` and
+    ``PATH.json``) nothing is trained: the model detects on every labelled image of ``data``
+    (cross-dataset evaluation, e.g. trained in simulation and tested on real images), with
+    the same per-image results and baselines; the split, folds and training options do not
+    apply and are refused.
+
     Writes ``detection.json`` (accuracy per fold and overall, seconds per image, candidates per
-    second, baselines), ``table2.md`` and ``overlays/{best,worst}_*.png`` (detection in red and
-    blue, the labelled positives in yellow and grey).
+    second, baselines, the per-image outcomes and exact McNemar tests of the detector against
+    each baseline on the same images), ``table2.md`` and ``overlays/{best,worst}_*.png``
+    (detection in red and blue, the labelled positives in yellow and grey).
 
     Test images of a fold are detected through ``executor`` (a
     :class:`graspsim.executor.Executor`: local processes or a Ray cluster; sequential when
@@ -201,48 +257,96 @@ def detection_benchmark(
 
     if detector not in ("dense", "exact"):
         raise ValueError(f"detector must be 'dense' or 'exact', got {detector!r}")
+    if model is not None:
+        refused = [name for name, value, default in (
+            ("extra_patches", extra_patches, None), ("extra_train", extra_train, None),
+            ("save_model", save_model, None), ("recognition_json", recognition_json, None),
+            ("fit_grid", fit_grid, None), ("hard_negatives", hard_negatives, 0),
+            ("encoder_param", encoder_param, None), ("C", C, None)) if value != default]
+        if refused:
+            raise ValueError(f"a saved model is evaluated without training: "
+                             f"{', '.join(refused)} cannot be used with it")
+        model_npz, model_json = DLSRDetector._paths(model)
+        fixed = DLSRDetector.load(model)  # FileNotFoundError / ValueError naming the file
+        learner, encoder = fixed.representation.learner, fixed.encoder
     if learner not in LEARNERS:
         raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
     if encoder not in ENCODERS:
         raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
     check_training_options(fit_grid, hard_negatives, hard_rounds)
+    extra = None
+    if extra_patches is not None:
+        from dlsr.patches import load_patch_file
+
+        extra = load_patch_file(extra_patches)
+    extra_samples = []
+    if extra_train is not None:
+        extra_format = format if extra_format is None else extra_format
+        extra_samples = [s for s in load_samples(extra_train, extra_format, extra_scale,
+                                                 extra_mapping) if s.positives]
+        if not extra_samples:
+            raise ValueError(f"no labelled images in the extra training data {extra_train}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     samples = load_samples(data, format, scale, mapping)
     samples = [s for s in samples if s.positives]
     if max_images is not None:
         samples = samples[:max_images]
-    if len(samples) < n_folds:
-        raise ValueError(f"{len(samples)} labelled images cannot make {n_folds} folds")
+    if model is not None:
+        if not samples:
+            raise ValueError(f"no labelled images in {data}")
+        split, n_folds = "model", 1
+        folds = [(None, list(range(len(samples))))]
+    else:
+        if len(samples) < n_folds:
+            raise ValueError(f"{len(samples)} labelled images cannot make {n_folds} folds")
+        folds = (datasets.object_wise_folds(samples, n_folds, seed) if split == "object"
+                 else datasets.image_wise_folds(samples, n_folds, seed) if split == "image"
+                 else None)
+        if folds is None:
+            raise ValueError(f"split must be 'image' or 'object', got {split!r}")
     if recognition_json is not None:
         p, c = _recognition_choice(recognition_json, learner, encoder)
         encoder_param = p if encoder_param is None else encoder_param
         C = c if C is None else C
     C = 1.0 if C is None else float(C)
-    folds = (datasets.object_wise_folds(samples, n_folds, seed) if split == "object"
-             else datasets.image_wise_folds(samples, n_folds, seed) if split == "image"
-             else None)
-    if folds is None:
-        raise ValueError(f"split must be 'image' or 'object', got {split!r}")
-    config = {
-        "data": str(data), "format": format, "scale": scale, "split": split, "learner": learner,
-        "encoder": encoder, "encoder_param": encoder_param, "C": C, "detector": detector,
-        "n_folds": n_folds, "n_atoms": n_atoms, "n_patches": n_patches,
-        "grid_negatives": float(grid_negatives),
-        "fit_grid": None if fit_grid is None else float(fit_grid), "region": region,
-        "rescore": rescore, "coarse_to_fine": coarse_to_fine, "n_images": len(samples),
-        "seed": seed,
-    }
-    if hard_negatives:  # only then in the keys: earlier runs' results and models still match
+    if model is not None:
+        config = {
+            "data": str(data), "format": format, "scale": scale, "split": split,
+            "model": str(model), "model_digest": _file_digest(model_json, model_npz),
+            "learner": learner, "encoder": encoder, "encoder_param": fixed.encoder_param,
+            "detector": detector, "n_folds": 1, "region": region, "rescore": rescore,
+            "coarse_to_fine": coarse_to_fine, "n_images": len(samples), "seed": seed,
+            "model_config": {k: v for k, v in fixed.config.items() if k != "grid"},
+        }
+    else:
+        config = {
+            "data": str(data), "format": format, "scale": scale, "split": split,
+            "learner": learner, "encoder": encoder, "encoder_param": encoder_param, "C": C,
+            "detector": detector, "n_folds": n_folds, "n_atoms": n_atoms,
+            "n_patches": n_patches, "grid_negatives": float(grid_negatives),
+            "fit_grid": None if fit_grid is None else float(fit_grid), "region": region,
+            "rescore": rescore, "coarse_to_fine": coarse_to_fine, "n_images": len(samples),
+            "seed": seed,
+        }
+    # options added later enter the keys only when used: earlier runs' results still match
+    if hard_negatives:
         config["hard_negatives"] = int(hard_negatives)
         if hard_rounds != 1:
             config["hard_rounds"] = int(hard_rounds)
+    if extra is not None:
+        config["extra_patches"] = {"path": str(extra_patches), "n": int(len(extra[0])),
+                                   "digest": _file_digest(extra_patches)}
+    if extra_samples:
+        config["extra_train"] = {"data": str(extra_train), "format": extra_format,
+                                 "scale": extra_scale, "n_images": len(extra_samples)}
     key = hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
     # fold models depend on the training configuration only (shared by detector options)
     train_cfg = {k: config[k] for k in ("data", "format", "scale", "split", "learner", "encoder",
                                         "encoder_param", "C", "n_folds", "n_atoms",
                                         "n_patches", "grid_negatives", "fit_grid", "region",
-                                        "n_images", "seed", "hard_negatives", "hard_rounds")
+                                        "n_images", "seed", "hard_negatives", "hard_rounds",
+                                        "extra_patches", "extra_train")
                  if k in config}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
@@ -260,19 +364,21 @@ def detection_benchmark(
         if not todo:
             continue
         mpath = out / "models" / f"{train_key}_fold{k}"
-        if mpath.with_name(mpath.name + ".json").is_file():
-            model = DLSRDetector.load(mpath)
+        if model is not None:
+            fold_model = fixed
+        elif mpath.with_name(mpath.name + ".json").is_file():
+            fold_model = DLSRDetector.load(mpath)
         else:
-            model = train_detector([samples[i] for i in train], learner=learner, encoder=encoder,
-                                   encoder_param=encoder_param, C=C, n_atoms=n_atoms,
-                                   n_patches=n_patches, grid_negatives=grid_negatives,
-                                   fit_grid=fit_grid, hard_negatives=hard_negatives,
-                                   hard_rounds=hard_rounds, random_state=seed + k,
-                                   region=region)
-            model.save(mpath)
-        det = model.detector(detector, region=region, rescore=rescore,
-                             **({"coarse_to_fine": True} if coarse_to_fine else {})) \
-            if detector == "dense" else model.detector("exact", region=region)
+            fold_model = train_detector(
+                [samples[i] for i in train] + extra_samples, learner=learner, encoder=encoder,
+                encoder_param=encoder_param, C=C, n_atoms=n_atoms, n_patches=n_patches,
+                grid_negatives=grid_negatives, fit_grid=fit_grid,
+                hard_negatives=hard_negatives, hard_rounds=hard_rounds, extra_patches=extra,
+                random_state=seed + k, region=region)
+            fold_model.save(mpath)
+        det = fold_model.detector(detector, region=region, rescore=rescore,
+                                  **({"coarse_to_fine": True} if coarse_to_fine else {})) \
+            if detector == "dense" else fold_model.detector("exact", region=region)
         tasks = [(det, samples[i], baselines, seed + i, {"config_key": key, "fold": k})
                  for i in todo]
         for rec_ in ex.imap(_detect_one, tasks, desc=f"fold {k}", star=True):
@@ -294,15 +400,23 @@ def detection_benchmark(
         })
     secs = np.array([r["seconds"] for r in recs])
     cands = np.array([r["n_candidates"] for r in recs])
+    success = [bool(r["success"]) for r in recs]
     summary = {
         "config": config,
         "machine": {"platform": platform.platform(), "processor": platform.processor(),
                     "python": platform.python_version()},
-        "accuracy": float(np.mean([r["success"] for r in recs])),
+        "accuracy": float(np.mean(success)),
         "accuracy_fold_mean": float(np.mean([f["accuracy"] for f in per_fold])),
         "accuracy_fold_std": float(np.std([f["accuracy"] for f in per_fold])),
         "baselines": {n: float(np.mean([r["baselines"][n] for r in recs])) for n in baselines},
+        "vs_baselines": {n: mcnemar_exact(success, [r["baselines"][n] for r in recs])
+                         for n in baselines},
         "folds": per_fold,
+        "per_image": [{"image_id": r["image_id"], "object_id": r["object_id"],
+                       "fold": fold_of[r["image_id"]], "success": bool(r["success"]),
+                       "jaccard": r["jaccard"],
+                       "baselines": {n: bool(r["baselines"][n]) for n in baselines}}
+                      for r in recs],
         "seconds_per_image": float(secs.mean()),
         "candidates_per_second": float(cands.sum() / max(secs.sum(), 1e-9)),
         "n_empty": int(sum(r["rect"] is None for r in recs)),
@@ -324,13 +438,13 @@ def detection_benchmark(
         name = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in str(s.image_id))
         Image.fromarray(img).save(ov / f"{tag}_{name}.png")
     if save_model is not None:
-        model = train_detector(samples, learner=learner, encoder=encoder,
-                               encoder_param=encoder_param, C=C, n_atoms=n_atoms,
-                               n_patches=n_patches, grid_negatives=grid_negatives,
-                               fit_grid=fit_grid, hard_negatives=hard_negatives,
-                               hard_rounds=hard_rounds, random_state=seed,
-                               detector=detector, region=region, rescore=rescore)
-        model.save(save_model)
+        full = train_detector(samples + extra_samples, learner=learner, encoder=encoder,
+                              encoder_param=encoder_param, C=C, n_atoms=n_atoms,
+                              n_patches=n_patches, grid_negatives=grid_negatives,
+                              fit_grid=fit_grid, hard_negatives=hard_negatives,
+                              hard_rounds=hard_rounds, extra_patches=extra, random_state=seed,
+                              detector=detector, region=region, rescore=rescore)
+        full.save(save_model)
         summary["model"] = str(save_model)
     return summary
 
@@ -338,6 +452,8 @@ def detection_benchmark(
 def table2_markdown(summary: dict) -> str:
     """The paper's Table 2 layout (image-wise | object-wise) with our run and the baselines."""
     cfg = summary["config"]
+    if cfg["split"] == "model":
+        return _cross_markdown(summary)
     col = 1 if cfg["split"] == "image" else 2
 
     def cell(v):
@@ -360,6 +476,33 @@ def table2_markdown(summary: dict) -> str:
         f"Jaccard > 0.25 of some positive), {cfg['n_folds']}-fold {cfg['split']}-wise cross-"
         f"validation. Paper and prior-work rows: Trottier et al. 2016, Table 2, on Cornell; "
         f"only the cells recorded in the reference facts are shown. Seconds per image: "
+        f"{summary['seconds_per_image']:.2f}."
+    )
+    return "\n".join(lines) + "\n"
+
+
+def _cross_markdown(summary: dict) -> str:
+    """A saved model evaluated on another dataset, beside the baselines on the same images."""
+    cfg = summary["config"]
+    n = cfg["n_images"]
+    scale = DEFAULT_SCALE[cfg["format"]] if cfg["scale"] is None else cfg["scale"]
+    lines = ["| method | accuracy (%) | images won | won alone vs it | McNemar p |",
+             "|---|---|---|---|---|"]
+    k = sum(r["success"] for r in summary["per_image"])
+    lines.append(f"| {cfg['learner']}-{cfg['encoder']} model `{Path(cfg['model']).name}` "
+                 f"({cfg['detector']} detector) | {100 * summary['accuracy']:.2f} | {k}/{n} "
+                 f"| — | — |")
+    for name, t in summary["vs_baselines"].items():
+        kb = sum(r["baselines"][name] for r in summary["per_image"])
+        lines.append(f"| baseline: {name} | {100 * summary['baselines'][name]:.2f} | {kb}/{n} "
+                     f"| {t['b_only']} vs {t['a_only']} | {t['p_value']:.3g} |")
+    lines.append("")
+    lines.append(
+        f"Cross-dataset detection: the saved model, trained elsewhere, on every labelled image "
+        f"of {cfg['format']} `{Path(cfg['data']).name}` (scale {scale:g}), top-1 rectangle "
+        f"by the rectangle metric (within 30 degrees and Jaccard > 0.25 of some positive); "
+        f"\"won alone\" counts the images the baseline gets right and the model not, against "
+        f"the reverse (exact McNemar test). Seconds per image: "
         f"{summary['seconds_per_image']:.2f}."
     )
     return "\n".join(lines) + "\n"
