@@ -266,3 +266,39 @@ def test_detection_ray_matches_loky(tmp_path, box_samples):
                                 executor=Executor(backend, n_jobs=2, progress=False))
         runs[backend] = s["per_image"]
     assert runs["ray"] == runs["loky"]
+
+
+def test_selftaught_benchmark_pairs_standard_and_selftaught(tmp_path, monkeypatch):
+    import graspsim.benchmarks as gb
+
+    patches = _patch_file(tmp_path / "extra.npz", n=50)
+    calls = []
+
+    def fake(data, format, out, learner, encoder, extra_patches, progress, **kw):
+        calls.append((learner, encoder, extra_patches, kw))
+        wins = [True, True, False, False] if extra_patches is None else [True, False, True, True]
+        return {"accuracy": sum(wins) / 4, "baselines": {"random": 0.25},
+                "config": {"encoder_param": None},
+                "per_image": [{"image_id": f"i{k}", "success": w}
+                              for k, w in enumerate(wins)]}
+
+    monkeypatch.setattr(gb, "detection_benchmark", fake)
+    res = gb.selftaught_benchmark("d", "jacquard", patches, tmp_path / "o",
+                                  combinations=["NKM-Natural", "GSVQ-ST"], n_atoms=12,
+                                  split="object")
+    assert [(c[0], c[1], c[2] is not None) for c in calls] == [
+        ("NKM", "Natural", False), ("NKM", "Natural", True),
+        ("GSVQ", "ST", False), ("GSVQ", "ST", True)]
+    assert all(c[3] == {"n_atoms": 12, "split": "object"} for c in calls)
+    row = res["rows"][0]
+    assert (row["standard"], row["selftaught"]) == (0.5, 0.75)
+    assert (row["selftaught_only"], row["standard_only"]) == (2, 1)
+    assert res["config"]["n_extra_patches"] == 50
+    md = (tmp_path / "o" / "table3.md").read_text()
+    assert "| GSVQ-ST | 50.0 (2/4) | 75.0 (3/4) | +25.0 | 2 vs 1 |" in md
+    with pytest.raises(ValueError, match="LEARNER-ENCODER"):
+        gb.selftaught_benchmark("d", "jacquard", patches, tmp_path / "o",
+                                combinations=["NKM_SC"])
+    with pytest.raises(ValueError, match="different images"):
+        gb.paired_detection_test({"per_image": [{"image_id": "a", "success": True}]},
+                                 {"per_image": [{"image_id": "b", "success": True}]})
