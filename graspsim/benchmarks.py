@@ -188,10 +188,10 @@ def _file_digest(*paths) -> str:
 
 def detection_benchmark(
     data, format: str, out, scale=None, mapping=None, split: str = "object",
-    learner: str = "NKM", encoder: str = "Natural", encoder_param=None, C: float | None = None,
-    recognition_json=None, detector: str = "dense", n_folds: int = 5, n_atoms: int = 300,
-    n_patches: int = 100_000, grid_negatives: float = 1.0, fit_grid: float | None = None,
-    hard_negatives: int = 0, hard_rounds: int = 1,
+    learner: str | None = None, encoder: str | None = None, encoder_param=None,
+    C: float | None = None, recognition_json=None, detector: str = "dense", n_folds: int = 5,
+    n_atoms: int = 300, n_patches: int = 100_000, grid_negatives: float = 1.0,
+    fit_grid: float | None = None, hard_negatives: int = 0, hard_rounds: int = 1,
     region: str = "auto", rescore: int = 300,
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
     save_model=None, extra_patches=None, extra_train=None, extra_format: str | None = None,
@@ -224,7 +224,8 @@ def detection_benchmark(
     ``PATH.json``) nothing is trained: the model detects on every labelled image of ``data``
     (cross-dataset evaluation, e.g. trained in simulation and tested on real images), with
     the same per-image results and baselines; the split, folds and training options do not
-    apply and are refused.
+    apply and are refused. ``learner`` and ``encoder`` default to NKM and Natural, or to the
+    model's (a different one given with a model is refused).
 
     Writes ``detection.json`` (accuracy per fold and overall, seconds per image, candidates per
     second, baselines, the per-image outcomes and exact McNemar tests of the detector against
@@ -268,7 +269,13 @@ def detection_benchmark(
                              f"{', '.join(refused)} cannot be used with it")
         model_npz, model_json = DLSRDetector._paths(model)
         fixed = DLSRDetector.load(model)  # FileNotFoundError / ValueError naming the file
+        for name, given, has in (("learner", learner, fixed.representation.learner),
+                                 ("encoder", encoder, fixed.encoder)):
+            if given is not None and given != has:
+                raise ValueError(f"{name} {given!r} given, but the model {model} has {has!r}")
         learner, encoder = fixed.representation.learner, fixed.encoder
+    learner = "NKM" if learner is None else learner
+    encoder = "Natural" if encoder is None else encoder
     if learner not in LEARNERS:
         raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
     if encoder not in ENCODERS:

@@ -93,8 +93,10 @@ def _register_detection(sub) -> None:
     d.add_argument("--extra-mapping", default=None,
                    help="Cornell image-to-object mapping file of --extra-train")
     d.add_argument("--split", choices=["image", "object"], default="object")
-    d.add_argument("--learner", default="NKM", help="one of SC OMP GSVQ NKM RP R")
-    d.add_argument("--encoder", default="Natural", help="one of SC mSC OMP mOMP ST Natural")
+    d.add_argument("--learner", default=None,
+                   help="one of SC OMP GSVQ NKM RP R (default NKM, or the --model's)")
+    d.add_argument("--encoder", default=None,
+                   help="one of SC mSC OMP mOMP ST Natural (default Natural, or the --model's)")
     d.add_argument("--encoder-param", type=float, default=None,
                    help="lambda or number of non-zeros (default: from --recognition, else the "
                         "middle of the reference grid)")

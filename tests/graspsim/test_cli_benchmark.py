@@ -230,6 +230,8 @@ def test_detection_with_a_saved_model_trains_nothing(tmp_path, box_samples, monk
     assert "detector model file not found" in capsys.readouterr().err
     assert main(args + ["--extra-patches", "x.npz"]) == 2
     assert "extra_patches cannot be used with it" in capsys.readouterr().err
+    assert main(args + ["--learner", "SC"]) == 2
+    assert "learner 'SC' given, but the model" in capsys.readouterr().err
 
 
 def test_mcnemar_exact():
