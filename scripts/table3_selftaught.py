@@ -28,7 +28,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", default=str(REPO.parent / "shared" / "data" / "jacquard_samples"))
+    ap.add_argument("--data", default="../shared/data/jacquard_samples",
+                    help="dataset folder (a run resumes only under the same spelling)")
     ap.add_argument("--format", choices=["cornell", "jacquard"], default="jacquard")
     ap.add_argument("--patches", required=True, help="npz from graspsim patches")
     ap.add_argument("--out", type=Path, default=REPO / "runs" / "table3")
