@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import os
 import time
 
 import numpy as np
@@ -263,6 +264,7 @@ def train_detector(
     fit_grid: float | None = None,
     hard_negatives: int = 0,
     hard_rounds: int = 1,
+    extra_patches=None,
     random_state=0,
     data=None,
     **config,
@@ -300,6 +302,11 @@ def train_detector(
         candidates that fail the rectangle metric join the negatives, and the SVM (not the
         representation) is refitted. 0 (default): none, as the paper.
     hard_rounds : int
+    extra_patches : tuple (patches, masks), str, Path or None
+        Unlabelled patches, each ``(m, 6, 6, 8)``, or a patch file
+        (:func:`dlsr.patches.load_patch_file`), joined to dictionary learning and whitening
+        only (self-taught learning, the paper's Table 3); the SVM's training rectangles are
+        unchanged.
     random_state : int
     data : RecognitionData or None
         Precomputed training rectangles of ``samples`` (skips preprocessing), e.g. from
@@ -323,6 +330,10 @@ def train_detector(
         grid = ENCODER_GRIDS[encoder]
         encoder_param = grid[len(grid) // 2 - 1]
     check_training_options(fit_grid, hard_negatives, hard_rounds)
+    if isinstance(extra_patches, (str, os.PathLike)):
+        from .patches import load_patch_file
+
+        extra_patches = load_patch_file(extra_patches)
     t0 = time.perf_counter()
     sgrid = config.get("grid", PAPER_GRID)
     if isinstance(sgrid, dict):
@@ -342,7 +353,8 @@ def train_detector(
     if len(np.unique(data.labels)) < 2:
         raise ValueError("training needs positive and negative rectangles")
     rep = fit_representation(data.images, data.masks, learner, n_atoms=n_atoms, whiten=whiten,
-                             n_patches=n_patches, random_state=random_state)
+                             n_patches=n_patches, extra=extra_patches,
+                             random_state=random_state)
     polarity = not (learner == "NKM" and encoder == "Natural")
     F = rectangle_features(data.images, data.masks, rep, encoder, encoder_param,
                            polarity=polarity)
@@ -383,6 +395,7 @@ def train_detector(
             "fit_grid": None if fit_grid is None else float(fit_grid),
             "hard_negatives": int(hard_negatives), "hard_rounds": int(hard_rounds),
             "n_hard_negatives": int(n_hard),
+            "n_extra_patches": 0 if extra_patches is None else int(len(extra_patches[0])),
             "n_train_rectangles": int(len(labels)),
             "n_train_positive": int(np.sum(labels == 1)),
             "train_seconds": time.perf_counter() - t0}
