@@ -159,21 +159,18 @@ def mcnemar_exact(a, b) -> dict:
     -------
     dict
         ``n`` images, ``a_only`` and ``b_only`` (images one method wins alone), the accuracies
-        ``a`` and ``b``, and ``p_value`` of :func:`scipy.stats.binomtest` (``a_only`` out of
-        the discordant pairs, p = 1/2); 1.0 when there is no discordant pair.
+        ``a`` and ``b``, and ``p_value`` (:func:`graspsim.compare.mcnemar_exact`); 1.0 when
+        there is no discordant pair.
     """
-    from scipy.stats import binomtest
+    from . import compare
 
-    a = np.asarray(a, dtype=bool)
-    b = np.asarray(b, dtype=bool)
-    if a.shape != b.shape or a.ndim != 1:
-        raise ValueError(f"paired outcomes must be two 1-d arrays of one length, got {a.shape} "
-                         f"and {b.shape}")
-    a_only, b_only = int(np.sum(a & ~b)), int(np.sum(b & ~a))
-    p = binomtest(a_only, a_only + b_only, 0.5).pvalue if a_only + b_only else 1.0
-    return {"n": int(len(a)), "a": float(a.mean()) if len(a) else None,
-            "b": float(b.mean()) if len(b) else None, "a_only": a_only, "b_only": b_only,
-            "p_value": float(p)}
+    counts = compare.paired_counts(a, b)
+    n = sum(counts.values())
+    return {"n": n,
+            "a": (counts["both"] + counts["only_a"]) / n if n else None,
+            "b": (counts["both"] + counts["only_b"]) / n if n else None,
+            "a_only": counts["only_a"], "b_only": counts["only_b"],
+            "p_value": compare.mcnemar_exact(counts["only_a"], counts["only_b"])}
 
 
 def _file_digest(*paths) -> str:
