@@ -477,8 +477,7 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
         The summary (:func:`graspsim.trials.summarize` plus ``top_k``, ``success_at``,
         ``images_without_predictions`` and the configuration), with ``records`` by index.
     """
-    from .executor import Executor
-    from .trials import read_done, summarize, wilson_interval
+    from .trials import _executor, _run_missing, read_done, summarize, wilson_interval
 
     if isinstance(top_k, bool) or not isinstance(top_k, int | np.integer) or top_k < 1:
         raise ValueError(f"top_k must be an integer >= 1, got {top_k!r}")
@@ -521,26 +520,13 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
         log.info("resuming: %d of %d images already scored", len(images) - len(todo),
                  len(images))
     t0 = time.perf_counter()
-    new = 0
-    if todo:
-        ex = executor or Executor(backend="loky" if n_jobs != 1 else "sequential",
-                                  n_jobs=n_jobs, progress=progress)
-        spec_records = manifest["object_specs"]
-        tasks = [(str(root.resolve()), e, spec_records, manifest["execution"],
-                  [_rect_list(r) for r in preds.get(e["image"], [])[:top_k]], top_k,
-                  len(preds.get(e["image"], [])))
-                 for e in todo]
-        fh = open(jsonl, "a") if jsonl is not None else None  # noqa: SIM115
-        try:
-            for rec in ex.imap(_score_task, tasks, desc="images", star=True):
-                done[rec["index"]] = rec
-                new += 1
-                if fh is not None:
-                    fh.write(json.dumps(rec) + "\n")
-                    fh.flush()
-        finally:
-            if fh is not None:
-                fh.close()
+    spec_records = manifest["object_specs"]
+    tasks = [(str(root.resolve()), e, spec_records, manifest["execution"],
+              [_rect_list(r) for r in preds.get(e["image"], [])[:top_k]], top_k,
+              len(preds.get(e["image"], [])))
+             for e in todo]
+    new = _run_missing(_score_task, tasks, done, jsonl,
+                       _executor(executor, n_jobs, progress) if tasks else None, "images")
     wall = time.perf_counter() - t0
     wanted = {int(e["index"]) for e in images}
     records = [done[i] for i in sorted(done) if i in wanted]
