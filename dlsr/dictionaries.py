@@ -35,6 +35,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from ._dense import check_finite
 from .coding import lasso, natural_encoder, omp
 
 __all__ = [
@@ -57,8 +58,7 @@ def _check_X(X):
     X = np.asarray(X)
     if X.ndim != 2 or X.shape[0] == 0 or X.shape[1] == 0:
         raise ValueError(f"X must be a non-empty 2-D array (n_patches, n_features), got {X.shape}")
-    if not np.all(np.isfinite(X)):
-        raise ValueError("X must be finite (no NaN or inf)")
+    check_finite(X, "X")  # before any product
     return X
 
 
