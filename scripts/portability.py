@@ -19,8 +19,9 @@ library loads) and gets one line: the kernels OpenBLAS reports it actually runs 
 ignored is a failure), passed / failed / skipped counts, the time. A failing configuration
 also lists its failing tests and keeps its log. Exit status 1 if any configuration failed.
 
-Usage: python scripts/portability.py [TEST_PATH ...] [-- PYTEST_ARGS ...]
-(default: the modules in :data:`TESTS`; it is not part of ``.ci/run``).
+Usage: python scripts/portability.py [--only KEYS] [TEST_PATH ...] [-- PYTEST_ARGS ...]
+(default: the modules in :data:`TESTS`; ``--only Haswell,generic`` runs the configurations
+whose name contains one of the comma-separated keys; it is not part of ``.ci/run``).
 """
 
 from __future__ import annotations
@@ -154,9 +155,20 @@ def main(argv: list[str]) -> int:
         tests, pytest_args = argv[:cut], argv[cut + 1:]
     else:
         tests, pytest_args = argv, []
+    only = None
+    if tests[:1] == ["--only"]:
+        if len(tests) < 2:
+            print("portability: error: --only needs a comma-separated list of keys")
+            return 2
+        only, tests = tests[1].split(","), tests[2:]
     tests = tests or TESTS
     logs = Path(tempfile.mkdtemp(prefix="portability-"))
     configs = configurations(cpu_flags())
+    if only is not None:
+        configs = [c for c in configs if any(k and k in c["name"] for k in only)]
+        if not configs:
+            print(f"portability: error: no configuration matches --only {','.join(only)}")
+            return 2
     print(f"portability: {len(tests)} test module(s) under {len(configs)} configuration(s); "
           f"logs in {logs}", flush=True)
     results = [run(c, tests, pytest_args, logs) for c in configs]
