@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: run test lint clean constraints
+.PHONY: run test lint clean constraints portability
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -31,6 +31,13 @@ test: $(TEST_STAMP)
 
 lint: $(TEST_STAMP)
 	$(BIN)/ruff check .
+
+# The numerical tests once per BLAS kernel set the CPU supports (OPENBLAS_CORETYPE=Prescott,
+# Haswell, SkylakeX where /proc/cpuinfo has avx512f) and once with numba's kernels compiled for
+# a generic CPU in a fresh cache; one line per configuration, non-zero exit if any fails.
+# PORTABILITY_ARGS: other test paths, and/or "-- PYTEST_ARGS". Not part of .ci/run.
+portability: $(TEST_STAMP)
+	$(BIN)/python scripts/portability.py $(PORTABILITY_ARGS)
 
 clean:
 	rm -rf $(VENV) runs .pytest_cache

@@ -19,7 +19,12 @@ A canvas is an ``(H, W, 8)`` float32 image with an ``(H, W, 8)`` validity mask (
 * :func:`soft_threshold_inplace` (:func:`soft_threshold_into` for a separate output) and
   :func:`triangle_inplace`: the element-wise parts of
   :func:`dlsr.coding.soft_threshold` and :func:`dlsr.coding.kmeans_triangle` in one pass over
-  a chunk of projections (numpy's separate passes cost a third of the matrix product).
+  a chunk of projections (numpy's separate passes cost a third of the matrix product);
+* :func:`first_non_finite_row` (and :func:`check_finite`, which raises on it): the inputs of
+  the encoders, the whitening and the learners are checked before any matrix product, because
+  what a product does with a NaN or an infinity depends on the BLAS kernels (OpenBLAS's
+  AVX-512 kernels raise the floating-point "invalid" flag on an infinity, which numpy turns
+  into a ``RuntimeWarning``; its SSE3 and AVX2 kernels do not).
 
 Compiled with numba (``nogil``, cached on disk): the caller runs chunks in threads.
 """
@@ -40,6 +45,8 @@ __all__ = [
     "soft_threshold_into",
     "triangle_inplace",
     "standardize_rows",
+    "first_non_finite_row",
+    "check_finite",
 ]
 
 PATCH = 6
@@ -384,3 +391,61 @@ def standardize_rows(X, M, group, n_groups, eps, out):
                 out[i, q] = (X[i, q] - mean[group[q]]) / sd[group[q]]
             else:
                 out[i, q] = 0.0
+
+
+# "reassoc" only: the sum vectorises, and ``v - v`` stays NaN for NaN and infinite ``v``
+@njit(nogil=True, cache=True, fastmath={"reassoc"})
+def _first_non_finite_row(a):
+    n, m = a.shape
+    if m == 0:
+        return -1
+    for i in range(n):
+        row = a[i]
+        acc = row[0] - row[0]  # 0 for a finite value, NaN for NaN and infinities (a's dtype)
+        for j in range(1, m):
+            acc += row[j] - row[j]
+        if acc != 0:  # NaN compares unequal
+            return i
+    return -1
+
+
+def first_non_finite_row(a) -> int:
+    """Index of the first row of ``a`` holding a NaN or an infinity, or -1.
+
+    One compiled pass without temporaries (float32 and float64; other dtypes go through
+    ``np.isfinite``); integer and boolean arrays are finite.
+
+    Parameters
+    ----------
+    a : array-like of shape (n, ...)
+        Rows along the first axis; a 0-d or 1-D array is one row.
+
+    Returns
+    -------
+    int
+    """
+    a = np.asarray(a)
+    if a.dtype.kind in "biu":
+        return -1
+    a2 = a.reshape(1, -1) if a.ndim < 2 else a.reshape(a.shape[0], -1)
+    if a.dtype in (np.float32, np.float64):
+        return int(_first_non_finite_row(a2))
+    bad = np.flatnonzero(~np.isfinite(a2).all(axis=1))  # float16, long double, complex
+    return int(bad[0]) if bad.size else -1
+
+
+def check_finite(a, name: str = "X"):
+    """Raise ``ValueError`` naming ``name`` (and the first bad row of a 2-D or larger array)
+    when ``a`` holds a NaN or an infinity.
+
+    Parameters
+    ----------
+    a : array-like
+    name : str
+        What ``a`` is, for the message.
+    """
+    a = np.asarray(a)
+    bad = first_non_finite_row(a)
+    if bad >= 0:
+        where = f": row {bad} is not" if a.ndim >= 2 else ""
+        raise ValueError(f"{name} must be finite (no NaN or inf){where}")

@@ -23,11 +23,14 @@ float64, and the path records the solution at every requested penalty as it cros
 recorded solution is recomputed as ``a_A = G_AA^{-1} (b_A - lam s_A)`` with one refinement step
 and checked against the lasso optimality (KKT) conditions; a row that fails (a degenerate tie)
 is solved again by scikit-learn's LARS. An atom that is linearly dependent on the active ones
-(e.g. a repeated atom) is kept out for that patch, as LARS does. Masked problems have one Gram
-matrix per mask: rows sharing a mask (fully valid patches, padding patterns; at least
-``min_group`` of them) read that mask's Gram matrix; for the other rows the masked Gram column
-of an entering atom is computed when it enters, from the unmasked Gram matrix minus the
-masked entries' contribution (or the sum over the valid entries when fewer).
+(e.g. a repeated atom) is kept out for that patch, as LARS does; which of two identical atoms
+enters (and so which column of the codes is used) depends on the rounding of the products,
+hence on the BLAS kernels (see :func:`omp`); the objective and the reconstruction do not.
+Masked problems have one Gram matrix per mask: rows sharing a mask (fully valid patches,
+padding patterns; at least ``min_group`` of them) read that mask's Gram matrix; for the other
+rows the masked Gram column of an entering atom is computed when it enters, from the unmasked
+Gram matrix minus the masked entries' contribution (or the sum over the valid entries when
+fewer).
 
 OMP is compiled per patch too (:func:`dlsr._homotopy.omp_path_rows`): each step selects the
 atom of largest absolute residual correlation, borders the inverse of the selected atoms' Gram
@@ -99,7 +102,7 @@ MIN_GROUP = 32
 # validation helpers
 
 
-def _check_xd(X, D, mask=None, name="X", check_finite=True):
+def _check_xd(X, D, mask=None, name="X", check_finite_x=True):
     X = np.asarray(X)
     D = np.asarray(D)
     if X.ndim != 2 or D.ndim != 2:
@@ -109,8 +112,11 @@ def _check_xd(X, D, mask=None, name="X", check_finite=True):
             f"{name} has {X.shape[1]} features per row but the dictionary atoms have "
             f"{D.shape[1]}"
         )
-    if not np.all(np.isfinite(D)) or (check_finite and not np.all(np.isfinite(X))):
-        raise ValueError(f"{name} and D must be finite (no NaN or inf)")
+    from dlsr._dense import check_finite
+
+    check_finite(D, "D")
+    if check_finite_x:
+        check_finite(X, name)
     if mask is not None:
         mask = np.asarray(mask)
         if mask.shape != X.shape:
@@ -482,8 +488,7 @@ def lasso_rowwise(X, D, lam, mask=None):
     from sklearn.decomposition import sparse_encode
     from sklearn.exceptions import ConvergenceWarning
 
-    X = np.asarray(X, dtype=np.float64)
-    D = np.asarray(D, dtype=np.float64)
+    X, D, _ = _check_xd(np.asarray(X, dtype=np.float64), np.asarray(D, dtype=np.float64))
     out = np.zeros((X.shape[0], D.shape[0]))
     p = X.shape[1]
     for i in range(X.shape[0]):
@@ -516,8 +521,7 @@ def omp_rowwise(X, D, n_nonzero, mask=None):
 
     from sklearn.linear_model import orthogonal_mp_gram
 
-    X = np.asarray(X, dtype=np.float64)
-    D = np.asarray(D, dtype=np.float64)
+    X, D, _ = _check_xd(np.asarray(X, dtype=np.float64), np.asarray(D, dtype=np.float64))
     out = np.zeros((X.shape[0], D.shape[0]))
     p = X.shape[1]
     for i in range(X.shape[0]):
@@ -539,6 +543,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
 
     OMP's selection does not depend on the final number of atoms, so one run to the largest
     ``L`` gives every smaller one (the least-squares fit on the first ``L`` selected atoms).
+    Which of two identical atoms is selected depends on rounding (see :func:`omp`).
 
     Parameters
     ----------
@@ -598,6 +603,17 @@ def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=M
     masked least squares; see the module docstring for why this and not the reference
     library's unit-norm assumption).
 
+    Ties between identical atoms: when the dictionary holds an atom twice (or an atom and its
+    negative), both have the same residual correlation up to rounding, and the rounding of the
+    products ``X D^T`` and ``D D^T`` depends on the BLAS kernels the CPU runs (OpenBLAS's
+    SSE3, AVX2 or AVX-512 kernels) and on where each copy sits in the product. Which copy is
+    selected, and so which column carries the coefficient, can therefore differ from one
+    machine to another (and from scikit-learn's choice). Nothing else does: the other copy is
+    linearly dependent on the selected atoms and never joins, so the number of atoms, the
+    coefficients summed over the copies of each atom, the reconstruction ``D^T a`` and the
+    residual are the same. Remove duplicate atoms first if the column matters. (Distinct atoms
+    whose correlations differ by less than the rounding are likewise picked by rounding.)
+
     Parameters
     ----------
     X : array-like of shape (n, p)
@@ -626,24 +642,36 @@ def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=M
 def _dense_chunks(X, n_out, fn, chunk_size, dtype):
     """``fn(x, out)`` over row chunks, in as many threads as BLAS may use (1 BLAS thread each).
 
-    ``fn`` returns a float that is finite when the chunk's inputs are (or None: the output's
-    sum is used).
+    ``fn`` receives ``x`` already in ``dtype`` and returns a float that is finite when its
+    products did not overflow (or None: the output's sum is used).
 
     Splitting rows over threads parallelises the element-wise work too, which threaded BLAS
-    alone does not. Non-finite input rows give non-finite outputs (NaN and inf propagate
-    through the products), so finiteness is checked on each chunk's output, in the workers.
+    alone does not. Each chunk's rows are checked finite before its product (in the workers):
+    what a product does with a NaN or an infinity depends on the BLAS kernels (OpenBLAS's
+    AVX-512 kernels raise numpy's "invalid value encountered in matmul" on an infinity, its
+    AVX2 and SSE3 kernels do not), so the error must come first. Finite rows can then only
+    overflow ``dtype``; the products run with numpy's overflow and invalid warnings off (again
+    kernel-dependent) and an overflow is reported as a ``ValueError``.
     """
+    from dlsr._dense import first_non_finite_row
+
     n = X.shape[0]
     out = np.empty((n, n_out), dtype=dtype)
     slices = list(_chunks(n, chunk_size))
 
     def run(sl):
+        x = X[sl]
+        bad = first_non_finite_row(x)
+        if bad >= 0:
+            raise ValueError(f"X must be finite (no NaN or inf): row {sl.start + bad} is not")
         o = out[sl]
-        check = fn(X[sl], o)  # a checksum of the chunk's inputs, or None: check the output
-        if check is None:
-            check = o.sum(dtype=np.float64)
-        if not np.isfinite(check) and not np.all(np.isfinite(X[sl])):
-            raise ValueError("X must be finite (no NaN or inf)")
+        with np.errstate(over="ignore", invalid="ignore"):  # errstate is per thread
+            check = fn(np.asarray(x, dtype=dtype), o)
+            if check is None:
+                check = o.sum(dtype=np.float64)
+        if not np.isfinite(check):
+            raise ValueError(f"the products of X (rows {sl.start} to {sl.stop - 1}) with the "
+                             f"dictionary overflow {np.dtype(dtype).name}; scale the input down")
 
     workers = min(_threads.blas_threads(), len(slices)) if len(slices) > 1 else 1
     if workers <= 1:
@@ -652,6 +680,21 @@ def _dense_chunks(X, n_out, fn, chunk_size, dtype):
         return out
     with _threads.limit(1), ThreadPoolExecutor(workers) as pool:
         list(pool.map(run, slices))
+    return out
+
+
+def _as_finite(a, dtype, name):
+    """``a`` cast to ``dtype`` (C-contiguous); ``ValueError`` if a value does not fit in it."""
+    from dlsr._dense import check_finite
+
+    with np.errstate(over="ignore"):
+        out = np.ascontiguousarray(a, dtype=dtype)
+    if out.dtype != np.asarray(a).dtype:
+        try:
+            check_finite(out, name)
+        except ValueError:
+            raise ValueError(f"{name} has values beyond the range of "
+                             f"{np.dtype(dtype).name}") from None
     return out
 
 
@@ -674,19 +717,19 @@ def soft_threshold(X, D, lam, *, chunk_size=4096, dtype=np.float32):
     -------
     A : ndarray of shape (n, d)
     """
-    X, D, _ = _check_xd(X, D, check_finite=False)  # checked on the outputs, per chunk
+    X, D, _ = _check_xd(X, D, check_finite_x=False)  # X: per chunk, before its product
     if not np.isfinite(lam) or lam < 0:
         raise ValueError(f"lam must be a finite number >= 0, got {lam}")
     from dlsr._dense import soft_threshold_inplace
 
-    Dt = np.ascontiguousarray(D.T, dtype=dtype)
+    Dt = _as_finite(D.T, dtype, "D")
     lam = dtype(lam) if isinstance(dtype, type) else np.dtype(dtype).type(lam)
 
     def fn(x, out):
-        np.matmul(np.asarray(x, dtype=Dt.dtype), Dt, out=out)
+        np.matmul(x, Dt, out=out)
         if lam == 0:
             return None
-        return soft_threshold_inplace(out, lam)  # one fused pass; input checksum
+        return soft_threshold_inplace(out, lam)  # one fused pass; sum of the projections
 
     return _dense_chunks(X, D.shape[0], fn, chunk_size, Dt.dtype)
 
@@ -738,14 +781,16 @@ def kmeans_triangle(X, centroids, *, chunk_size=4096, dtype=np.float32):
     """
     from dlsr._dense import triangle_inplace
 
-    X, C, _ = _check_xd(X, centroids, check_finite=False)  # checked on the outputs
-    Ct = np.ascontiguousarray(C.T, dtype=dtype) * -2  # z = ||x||^2 - 2 x.c + ||c||^2
-    cn = np.einsum("kp,kp->k", C, C).astype(Ct.dtype)
+    X, C, _ = _check_xd(X, centroids, check_finite_x=False)  # X: per chunk, before products
+    Ct = _as_finite(C.T, dtype, "the centroids")
+    with np.errstate(over="ignore"):  # an overflow shows in the checksum below
+        Ct = Ct * -2  # z = ||x||^2 - 2 x.c + ||c||^2
+        cn = np.einsum("kp,kp->k", C, C).astype(Ct.dtype)
 
     def fn(x, z):
-        x = np.asarray(x, dtype=Ct.dtype)
         np.matmul(x, Ct, out=z)
-        return triangle_inplace(z, cn, np.einsum("np,np->n", x, x))  # one fused pass
+        # one fused pass; its checksum (the sum of the squared distances) sees an overflow
+        return triangle_inplace(z, cn, np.einsum("np,np->n", x, x))
 
     return _dense_chunks(X, C.shape[0], fn, chunk_size, Ct.dtype)
 

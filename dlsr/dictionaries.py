@@ -16,7 +16,8 @@ dlsr-reference-facts.md``):
   ``argmax |d . x|``; each atom becomes the sum of ``(d . x) x`` over its patches, normalised;
   atoms with a tiny norm are re-drawn; 100 iterations.
 - NKM: k-means with 100 full Lloyd iterations, random initialisation (Gaussian, scale 0.1, as
-  Coates and Ng), empty clusters reset to random patches; the dictionary is the normalised
+  Coates and Ng), empty clusters reset to random patches (a patch nearest to several identical
+  centroids joins the first, whatever the rounding); the dictionary is the normalised
   centroids, and the un-normalised ones are kept for the natural (triangle) encoder.
 - RP: random patches, normalised. R: random Gaussian atoms, normalised.
 
@@ -35,6 +36,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from ._dense import check_finite
 from .coding import lasso, natural_encoder, omp
 
 __all__ = [
@@ -57,8 +59,7 @@ def _check_X(X):
     X = np.asarray(X)
     if X.ndim != 2 or X.shape[0] == 0 or X.shape[1] == 0:
         raise ValueError(f"X must be a non-empty 2-D array (n_patches, n_features), got {X.shape}")
-    if not np.all(np.isfinite(X)):
-        raise ValueError("X must be finite (no NaN or inf)")
+    check_finite(X, "X")  # before any product
     return X
 
 
@@ -175,6 +176,13 @@ def kmeans(X, n_clusters, n_iter=100, random_state=None, init_scale=0.1):
 
 
 def _assign(X32, C, chunk=16384):
+    """Nearest centroid of each row; a tie between identical centroids goes to the first.
+
+    The distances of identical centroids differ by rounding only, and that rounding depends
+    on the BLAS kernels and on each centroid's place in the product, so ``argmin`` alone would
+    give the rows to either copy depending on the machine (two empty clusters can be reset to
+    the same patch). The rows go to the first copy; the others end empty and are reset.
+    """
     c2 = 0.5 * np.einsum("kp,kp->k", C, C)
     out = np.empty(X32.shape[0], dtype=np.int64)
     Ct = np.ascontiguousarray(C.T)
@@ -182,6 +190,9 @@ def _assign(X32, C, chunk=16384):
         z = X32[s : s + chunk] @ Ct
         np.subtract(c2, z, out=z)
         out[s : s + chunk] = np.argmin(z, axis=1)
+    _, first, copy_of = np.unique(C, axis=0, return_index=True, return_inverse=True)
+    if first.size < C.shape[0]:  # identical centroids: O(k p log k), nothing when all differ
+        out = first[copy_of.ravel()][out]
     return out
 
 

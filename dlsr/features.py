@@ -361,6 +361,9 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
     Returns ``plans`` (per encoder, one key ``(method, masked, value, split)`` per parameter)
     and ``codes`` (``(method, masked, value)`` -> unsplit codes).
     """
+    from ._dense import check_finite
+
+    check_finite(X, "the patches X")  # before the shared product below (kernel-dependent)
     plans = {}
     needed: dict = {}
     for enc, params in grids.items():

@@ -25,7 +25,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, OneToOneFeatureMixin, TransformerMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from ._dense import standardize_rows
+from ._dense import check_finite, standardize_rows
 
 __all__ = [
     "CHANNEL_GROUPS",
@@ -48,6 +48,9 @@ def _check_xm(X, M, name="X"):
     X = np.asarray(X)
     if not np.issubdtype(X.dtype, np.floating):
         X = X.astype(np.float64)
+    # before any product: what BLAS does with NaN or inf depends on its kernels (a warning on
+    # some, none on others); masked entries too (they enter the ZCA product as they are)
+    check_finite(X, name)
     if M is None:
         M = np.ones(X.shape, dtype=bool)
     else:
@@ -80,6 +83,12 @@ def standardize_patches(X, M=None, eps: float = 1e-4):
     ndarray of the same shape and floating dtype as ``X`` (float64 for integer input)
         Within each patch and group, valid entries have mean 0 and (``ddof=1``) variance
         ``var / (var + eps)``; masked entries are 0.
+
+    Raises
+    ------
+    ValueError
+        If ``X`` holds a NaN or an infinity (masked entries included: masked values are 0 by
+        the project's conventions), naming the first bad row.
     """
     X, M = _check_xm(X, M)
     shape = X.shape
@@ -114,7 +123,8 @@ def fit_zca(X, M=None, epsilon: float = 0.1):
     Raises
     ------
     ValueError
-        If fewer than ``n_features + 1`` patches are fully valid.
+        If fewer than ``n_features + 1`` patches are fully valid, or ``X`` holds a NaN or an
+        infinity (masked entries included).
     """
     X, M = _check_xm(X, M)
     if X.ndim != 2:
@@ -154,6 +164,12 @@ def apply_zca(X, M, mean, P):
     Returns
     -------
     ndarray of the same shape and floating dtype as ``X``; masked entries are 0.
+
+    Raises
+    ------
+    ValueError
+        If ``X`` (masked entries included: they enter the product), ``mean`` or ``P`` holds a
+        NaN or an infinity; checked before the product.
     """
     X, M = _check_xm(X, M)
     mean = np.asarray(mean)
@@ -163,6 +179,8 @@ def apply_zca(X, M, mean, P):
         raise ValueError(
             f"mean {mean.shape} and P {P.shape} do not fit {p} features"
         )
+    check_finite(mean, "the ZCA mean")
+    check_finite(P, "the ZCA matrix P")
     dtype = X.dtype
     X2 = X.reshape(-1, p)
     M2 = M.reshape(-1, p)

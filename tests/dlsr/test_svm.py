@@ -127,7 +127,12 @@ def test_newton_reaches_the_lbfgs_minimum(n, d, C):
     clear = np.abs(f) > 1e-3 * np.abs(f).max()  # not on the boundary itself
     assert clear.mean() > 0.95
     np.testing.assert_array_equal(f[clear] > 0, f_ref[clear] > 0)
-    np.testing.assert_array_equal((X @ w + b > 0), (X @ w_ref + b_ref > 0))
+    # training rows too, off the boundary (both solutions agree to about 1e-6 relative, so a
+    # row closer to it than that may land on either side, depending on rounding)
+    f, f_ref = X @ w + b, X @ w_ref + b_ref
+    clear = np.abs(f) > 1e-3 * np.abs(f).max()
+    assert clear.mean() > 0.9
+    np.testing.assert_array_equal(f[clear] > 0, f_ref[clear] > 0)
 
 
 @pytest.mark.parametrize(("n", "d"), SHAPES)
