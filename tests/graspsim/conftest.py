@@ -72,3 +72,14 @@ def obs_files(saved_model, tmp_path):
     tifffile.imwrite(depth, obs["depth"])
     Image.fromarray(obs["mask"].astype(np.uint8) * 255).save(mask)
     return rgb, depth, mask
+
+
+@pytest.fixture(scope="session")
+def easy_objects():
+    """A few graspable test-split objects (kept short for CI)."""
+    from graspsim.objects import builtin_objects
+
+    names = {"can_tall", "box_matches", "toothbrush", "bottle_shampoo"}
+    specs = [s for s in builtin_objects("all") if s.name in names]
+    assert len(specs) >= 2, "built-in objects missing: run scripts/make_objects.py"
+    return specs

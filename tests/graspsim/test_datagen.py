@@ -11,17 +11,9 @@ import pytest
 from dlsr.datasets import _format_corners, load_cornell, read_cornell_rectangles
 from dlsr.rectangles import GraspRectangle
 from graspsim.datagen import MANIFEST, make_dataset, make_patches, snap_rectangles
-from graspsim.objects import builtin_objects
 
 pytestmark = pytest.mark.sim
 
-
-@pytest.fixture(scope="module")
-def easy_objects():
-    names = {"can_tall", "box_matches", "toothbrush", "bottle_shampoo"}
-    specs = [s for s in builtin_objects("all") if s.name in names]
-    assert len(specs) >= 2, "built-in objects missing: run scripts/make_objects.py"
-    return specs
 
 
 @pytest.fixture(scope="module")

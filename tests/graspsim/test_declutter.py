@@ -17,18 +17,10 @@ from graspsim.declutter import (
     scene_after_grasp,
 )
 from graspsim.execution import GraspResult
-from graspsim.objects import builtin_objects
 from graspsim.trials import NO_PROPOSAL, TrialConfig, run_trials
 
 pytestmark = pytest.mark.sim
 
-
-@pytest.fixture(scope="module")
-def easy_objects():
-    names = {"can_tall", "box_matches", "toothbrush", "bottle_shampoo"}
-    specs = [s for s in builtin_objects("all") if s.name in names]
-    assert len(specs) >= 2, "built-in objects missing: run scripts/make_objects.py"
-    return specs
 
 
 def strip(rec):

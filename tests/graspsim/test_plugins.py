@@ -105,14 +105,6 @@ def plugin_dir(tmp_path, monkeypatch):
         sys.modules.pop(n, None)
 
 
-@pytest.fixture
-def easy_objects():
-    from graspsim.objects import builtin_objects
-
-    names = {"can_tall", "box_matches", "toothbrush", "bottle_shampoo"}
-    return [s for s in builtin_objects("all") if s.name in names]
-
-
 def strip(records, extra=()):
     drop = {"seconds", "planning_seconds", *extra}
     return [{k: v for k, v in r.items() if k not in drop} for r in records]

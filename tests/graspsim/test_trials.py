@@ -11,19 +11,10 @@ from dlsr.datasets import load_cornell
 from dlsr.patches import load_patch_file
 from graspsim.datagen import make_dataset, make_patches
 from graspsim.detectors import load_detector
-from graspsim.objects import builtin_objects
 from graspsim.trials import TrialConfig, run_trials, wilson_interval
 
 pytestmark = pytest.mark.sim
 
-
-@pytest.fixture(scope="module")
-def easy_objects():
-    """A few graspable test-split objects (kept short for CI)."""
-    names = {"can_tall", "box_matches", "toothbrush", "bottle_shampoo"}
-    specs = [s for s in builtin_objects("all") if s.name in names]
-    assert len(specs) >= 2, "built-in objects missing: run scripts/make_objects.py"
-    return specs
 
 
 def strip(records):
