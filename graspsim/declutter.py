@@ -33,21 +33,17 @@ from dataclasses import asdict
 
 import numpy as np
 
-from dlsr.records import write_json_atomic, write_text_atomic
-
 from .execution import ExecutionParams
 from .scene import TABLE_HALF_SIZE, PlacedObject, Scene, build_scene, capture, link_pose, settle
 from .trials import (
     NO_PROPOSAL,
     TrialConfig,
+    _campaign,
     _detector_name,
     _execute,
-    _executor,
     _label_scene,
-    _open_campaign,
     _planning_line,
     _resolve,
-    _run_missing,
     _worker_sim,
     observation,
     observe_scene,
@@ -247,25 +243,10 @@ def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, 
     meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
             else [s.name for s in specs], "seed": seed, "config": asdict(config),
             "mode": "declutter"}
-    out, jsonl, done = _open_campaign(out, meta, "rounds.jsonl")
-    todo = [i for i in range(n) if i not in done]
-    if done:
-        log.info("resuming: %d of %d rounds already done", n - len(todo), n)
-    t0 = time.perf_counter()
-    tasks = [(specs, det, seed, i, config, params) for i in todo]
-    new = _run_missing(_round_task, tasks, done, jsonl,
-                       _executor(executor, n_jobs, progress) if tasks else None, "rounds")
-    wall = time.perf_counter() - t0
-    records = [done[i] for i in sorted(done) if i < n]
-    summary = summarize_rounds(records, random_state=seed)
-    summary.update(meta)
-    summary["rounds_per_second"] = (new / wall) if new and wall > 0 else None
-    summary["n_jobs"] = n_jobs if executor is None else executor.n_jobs
-    if out is not None:
-        write_json_atomic(out / "summary.json", summary)
-        write_text_atomic(out / "summary.md", rounds_markdown(summary))
-    summary["records"] = records
-    return summary
+    return _campaign(_round_task, "rounds", meta, out, n, [specs, det, seed, config, params],
+                     executor, n_jobs, progress,
+                     lambda records: summarize_rounds(records, random_state=seed),
+                     rounds_markdown)
 
 
 def bootstrap_ratio_interval(num, den, n_boot: int = 2000, level: float = 0.95,

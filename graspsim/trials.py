@@ -447,23 +447,36 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
         raise ValueError(f"n must be >= 0, got {n}")
     meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
             else [s.name for s in specs], "seed": seed, "config": asdict(config)}
-    out, jsonl, done = _open_campaign(out, meta, "trials.jsonl")
+    return _campaign(_trial_task, "trials", meta, out, n, [specs, det, seed, config, params],
+                     executor, n_jobs, progress, summarize, summary_markdown)
+
+
+def _campaign(task, unit: str, meta: dict, out, n: int, args: list, executor, n_jobs: int,
+              progress: bool, summarize_fn, markdown_fn) -> dict:
+    """Run (or finish) items ``0 .. n-1`` of a resumable campaign and write its summaries.
+
+    Item ``i`` runs ``task(*args[:3], i, *args[3:])`` (``specs, detector, seed, i, config,
+    params``); records go to ``out/<unit>.jsonl`` as they come, the summary of
+    ``summarize_fn(records)`` (with ``meta``, ``<unit>_per_second`` and ``n_jobs``) to
+    ``summary.json`` and ``markdown_fn(summary)`` to ``summary.md``.
+    """
+    out, jsonl, done = _open_campaign(out, meta, f"{unit}.jsonl")
     todo = [i for i in range(n) if i not in done]
     if done:
-        log.info("resuming: %d of %d trials already done", n - len(todo), n)
+        log.info("resuming: %d of %d %s already done", n - len(todo), n, unit)
     t0 = time.perf_counter()
-    tasks = [(specs, det, seed, i, config, params) for i in todo]
-    new = _run_missing(_trial_task, tasks, done, jsonl,
-                       _executor(executor, n_jobs, progress) if tasks else None, "trials")
+    tasks = [(*args[:3], i, *args[3:]) for i in todo]
+    new = _run_missing(task, tasks, done, jsonl,
+                       _executor(executor, n_jobs, progress) if tasks else None, unit)
     wall = time.perf_counter() - t0
     records = [done[i] for i in sorted(done) if i < n]
-    summary = summarize(records)
+    summary = summarize_fn(records)
     summary.update(meta)
-    summary["trials_per_second"] = (new / wall) if new and wall > 0 else None
+    summary[f"{unit}_per_second"] = (new / wall) if new and wall > 0 else None
     summary["n_jobs"] = n_jobs if executor is None else executor.n_jobs
     if out is not None:
         write_json_atomic(out / "summary.json", summary)
-        write_text_atomic(out / "summary.md", summary_markdown(summary))
+        write_text_atomic(out / "summary.md", markdown_fn(summary))
     summary["records"] = records
     return summary
 
