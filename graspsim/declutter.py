@@ -41,14 +41,12 @@ from .trials import (
     _campaign,
     _detector_name,
     _execute,
-    _label_scene,
+    _label_and_propose,
     _planning_line,
     _resolve,
     _worker_sim,
-    observation,
     observe_scene,
     planning_stats,
-    propose,
     resolve_objects,
     wilson_interval,
 )
@@ -182,15 +180,9 @@ def run_round(sim, specs, detector, seed: int, index: int,
             st = _attempt_streams(seed, index, a)
             bodies = build_scene(sim, scene)
             frame = capture(sim, scene, bodies, st["camera"])
-        obs = observation(frame, st["detector_seed"])
-        positives, n_labelled = _label_scene(sim, scene, frame, bodies, st["label"], detector,
-                                             config, params)
-        if positives is not None:
-            obs["positives"] = positives
-        try:
-            rects, scores, error, planning = propose(detector, obs, name)
-        except ValueError as exc:
-            raise ValueError(f"round {index} (seed {seed}), attempt {a}: {exc}") from None
+        positives, n_labelled, (rects, scores, error, planning) = _label_and_propose(
+            sim, scene, frame, bodies, st, detector, config, params, name,
+            f"round {index} (seed {seed}), attempt {a}")
         if error is not None or not rects:
             end, end_planning = (error or NO_PROPOSAL), round(planning, 6)
             break

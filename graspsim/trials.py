@@ -306,15 +306,9 @@ def run_trial(sim, specs, detector, seed: int, index: int,
     """
     t0 = time.perf_counter()
     scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects)
-    obs = observation(frame, st["detector_seed"])
-    positives, n_labelled = _label_scene(sim, scene, frame, bodies, st["label"], detector,
-                                         config, params)
-    if positives is not None:
-        obs["positives"] = positives
-    try:
-        rects, scores, error, planning = propose(detector, obs, name)
-    except ValueError as exc:
-        raise ValueError(f"trial {index} (seed {seed}): {exc}") from None
+    positives, n_labelled, (rects, scores, error, planning) = _label_and_propose(
+        sim, scene, frame, bodies, st, detector, config, params, name,
+        f"trial {index} (seed {seed})")
     record = {
         "index": index, "seed": seed, "object": [o.spec.name for o in scene.objects],
         "graspable": all(o.spec.graspable for o in scene.objects),
@@ -325,6 +319,24 @@ def run_trial(sim, specs, detector, seed: int, index: int,
     record["planning_seconds"] = round(planning, 6)
     record["seconds"] = round(time.perf_counter() - t0, 4)
     return record
+
+
+def _label_and_propose(sim, scene, frame, bodies, streams, detector, config, params, name,
+                       where: str):
+    """Label the observed scene (when ``config`` asks) and ask the detector for rectangles.
+
+    Returns ``(positives or None, n_labelled, propose(...))``; a return value that breaks the
+    detector protocol is a ValueError prefixed with ``where`` (the trial, round or attempt).
+    """
+    obs = observation(frame, streams["detector_seed"])
+    positives, n_labelled = _label_scene(sim, scene, frame, bodies, streams["label"], detector,
+                                         config, params)
+    if positives is not None:
+        obs["positives"] = positives
+    try:
+        return positives, n_labelled, propose(detector, obs, name)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
 
 
 def _trial_task(specs, detector, seed, index, config, params):
