@@ -209,9 +209,9 @@ class RandomDetector:
 def object_mask_from_depth(depth, valid, min_height: float = 0.006) -> np.ndarray:
     """Pixels standing more than ``min_height`` (m) above the table plane, largest blob.
 
-    The observation-side name for :func:`dlsr.detection.table_plane_mask` (RANSAC plane in
-    inverse depth, restricted to the table's convex hull), so the baselines and the DLSR
-    detectors find the object the same way.
+    The observation-side name for :func:`dlsr.detection.table_plane_mask` (the table's
+    surface fitted robustly in inverse depth, the object the blob standing in front of it that
+    the table encloses), so the baselines and the DLSR detectors find the object the same way.
 
     Parameters
     ----------
