@@ -244,8 +244,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     from dlsr.records import read_json, write_json_atomic
 
     from .execution import ExecutionParams
-    from .executor import Executor
-    from .trials import read_done, resolve_objects
+    from .trials import _executor, read_done, resolve_objects
 
     if n_scenes < 1:
         raise ValueError(f"n_scenes must be >= 1, got {n_scenes}")
@@ -270,8 +269,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         log.info("resuming dataset: %d of %d scenes already written", n_scenes - len(todo),
                  n_scenes)
     t0 = time.perf_counter()
-    ex = executor or Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
-                              progress=progress)
+    ex = _executor(executor, n_jobs, progress)
     tasks = [(specs, seed, i, n_candidates, n_objects, sampler) for i in todo]
     with log_path.open("a") as fh:
         for i, (sample, rs, entry) in zip(
@@ -378,16 +376,14 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
     """
     from dlsr.patches import sample_patches, save_patch_file
 
-    from .executor import Executor
-    from .trials import resolve_objects
+    from .trials import _executor, resolve_objects
 
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
     specs = resolve_objects(objects)
     n_scenes = max(2, int(np.ceil(n / 2000))) if n_scenes is None else int(n_scenes)
     t0 = time.perf_counter()
-    ex = executor or Executor(backend="loky" if n_jobs != 1 else "sequential", n_jobs=n_jobs,
-                              progress=progress)
+    ex = _executor(executor, n_jobs, progress)
     tasks = [(specs, seed, i, rects_per_scene, n_objects) for i in range(n_scenes)]
     parts = list(ex.imap(_patch_scene, tasks, desc="scenes", star=True))
     images = np.concatenate([p[0] for p in parts])
