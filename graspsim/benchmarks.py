@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from pathlib import Path
 
@@ -190,7 +191,7 @@ def detection_benchmark(
     C: float | None = None, recognition_json=None, detector: str = "dense", n_folds: int = 5,
     n_atoms: int = 300, n_patches: int = 100_000, grid_negatives: float = 1.0,
     fit_grid: float | None = None, hard_negatives: int = 0, hard_rounds: int = 1,
-    region: str = "auto", rescore: int = 300,
+    region: str = "auto", rescore: int = 300, clear_jaws: bool = False,
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
     save_model=None, extra_patches=None, extra_train=None, extra_format: str | None = None,
     extra_scale=None, extra_mapping=None, model=None, seed: int = 0, progress: bool = True,
@@ -210,6 +211,9 @@ def detection_benchmark(
     metric; the baselines (``random`` on the object, ``mask-pca``) run on the same images.
     Results are appended per test image to ``out/results.jsonl`` and a rerun with the same
     configuration skips finished images and reuses saved fold models.
+
+    ``clear_jaws`` searches only rectangles whose jaws come down beside the object region
+    (:attr:`dlsr.detection.SearchGrid.clear_jaws`; detection only, the training is the same).
 
     ``extra_patches`` (a patch file, :func:`dlsr.patches.load_patch_file`) joins unlabelled
     patches to each fold's whitening and dictionary learning only (self-taught learning, the
@@ -335,6 +339,8 @@ def detection_benchmark(
             "seed": seed,
         }
     # options added later enter the keys only when used: earlier runs' results still match
+    if clear_jaws:
+        config["clear_jaws"] = True
     if hard_negatives:
         config["hard_negatives"] = int(hard_negatives)
         if hard_rounds != 1:
@@ -386,6 +392,8 @@ def detection_benchmark(
         det = fold_model.detector(detector, region=region, rescore=rescore,
                                   **({"coarse_to_fine": True} if coarse_to_fine else {})) \
             if detector == "dense" else fold_model.detector("exact", region=region)
+        if clear_jaws:
+            det.grid = dataclasses.replace(det.grid, clear_jaws=True)
         tasks = [(det, samples[i], baselines, seed + i, {"config_key": key, "fold": k})
                  for i in todo]
         for rec_ in ex.imap(_detect_one, tasks, desc=f"fold {k}", star=True):

@@ -18,6 +18,7 @@ or in the current folder; installed packages can register names in the entry-poi
 
 from __future__ import annotations
 
+import copy
 import importlib
 import os
 import re
@@ -40,6 +41,9 @@ __all__ = [
     "RandomDetector",
     "MaskPCADetector",
     "OracleDetector",
+    "GripperAwareDetector",
+    "executable",
+    "gripper_aware",
     "DETECTORS",
     "load_detector",
     "check_detector",
@@ -286,6 +290,121 @@ ENTRY_POINT_GROUP = "graspsim.detectors"
 
 # ``package.module:NAME`` (NAME may be dotted: ``module:Class.factory``), as entry points write it.
 _SPEC = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
+
+
+def executable(rects, obs, table_depth=None, tolerance: float = 0.003) -> np.ndarray:
+    """Which rectangles this gripper can execute, judged from the observation alone.
+
+    A rectangle passes when :func:`graspsim.grasp.rectangle_to_grasp` gives it a pose (depth
+    under its centre, opening within the gripper's reach) and the open fingers, coming down
+    along the approach, meet no surface seen in the depth image
+    (:func:`graspsim.grasp.fingers_collide`, with the table surface fitted to the depth as
+    :func:`dlsr.detection.table_surface` finds it, where the executor stops the fingertips).
+
+    Parameters
+    ----------
+    rects : sequence of GraspRectangle
+    obs : mapping
+        The observation (``depth``, ``depth_valid``, ``K``, ``T_world_cam``).
+    table_depth : ndarray of shape (H, W) or None
+        The table's depth; fitted to ``obs["depth"]`` when None.
+    tolerance : float
+        Metres (see :func:`graspsim.grasp.fingers_collide`).
+
+    Returns
+    -------
+    ndarray of shape (n,), bool
+    """
+    from dlsr.detection import table_surface
+
+    from .grasp import fingers_collide, rectangle_to_grasp
+
+    for key in ("depth", "K", "T_world_cam"):
+        if obs.get(key) is None:
+            raise ValueError(f"judging rectangles executable needs the observation's {key!r}")
+    depth = np.asarray(obs["depth"], dtype=np.float32)
+    valid = np.asarray(obs.get("depth_valid", depth > 0), dtype=bool) & (depth > 0)
+    if table_depth is None and len(rects):
+        table_depth = table_surface(depth, valid)
+    out = np.zeros(len(rects), dtype=bool)
+    for i, r in enumerate(rects):
+        g = rectangle_to_grasp(r, depth, valid, obs["K"], obs["T_world_cam"])
+        out[i] = g.failure is None and not fingers_collide(
+            g, depth, valid, obs["K"], obs["T_world_cam"], table_depth, tolerance=tolerance)
+    return out
+
+
+class GripperAwareDetector:
+    """Another detector's ranking, keeping the rectangles the gripper can execute.
+
+    The wrapped detector proposes its ranked rectangles; those :func:`executable` rejects
+    (no depth at the centre, wider than the gripper opens, a finger landing on a surface seen in
+    the depth image) are dropped and the first ``keep`` of the others returned in the same order.
+    Nothing of the simulator's state is used: a real robot can run the same check on its own
+    camera's depth. A departure from the paper (which ranks rectangles by appearance alone).
+
+    Parameters
+    ----------
+    detector : object with ``predict(obs)``
+        Ranks rectangles, best first; it should propose several (e.g. a DLSR detector with
+        ``top_k=40``) so that some remain.
+    keep : int
+        Rectangles returned at most.
+    tolerance : float
+        Metres (see :func:`graspsim.grasp.fingers_collide`).
+    """
+
+    def __init__(self, detector, keep: int = 5, tolerance: float = 0.003):
+        self.detector = detector
+        self.keep = keep
+        self.tolerance = tolerance
+
+    def predict(self, obs) -> list[GraspRectangle]:
+        rects, _ = check_detections(self.detector.predict(obs), type(self.detector).__name__)
+        if not rects:
+            return []
+        ok = executable(rects, obs, tolerance=self.tolerance)
+        return [r for r, k in zip(rects, ok, strict=True) if k][: self.keep]
+
+    def __repr__(self):
+        return f"GripperAwareDetector({self.detector!r}, keep={self.keep})"
+
+
+def gripper_aware(detector, top_k: int = 40, keep: int = 5) -> GripperAwareDetector:
+    """``detector`` made aware of this gripper (:class:`GripperAwareDetector`).
+
+    A DLSR grid detector (:class:`dlsr.detection.DenseDetector` or
+    :class:`~dlsr.detection.ExactGridDetector`) is first told to search only rectangles whose
+    jaws come down beside the object region (``SearchGrid.clear_jaws``) with an opening the
+    gripper reaches (``SearchGrid.max_width``, :data:`graspsim.gripper.MAX_OPENING`), and to
+    return its best ``top_k`` (rescoring at least as many exactly); any other detector is
+    wrapped as it is.
+
+    Parameters
+    ----------
+    detector : object with ``predict(obs)``
+    top_k : int
+        DLSR candidates ranked before the check.
+    keep : int
+
+    Returns
+    -------
+    GripperAwareDetector
+    """
+    import dataclasses
+
+    from dlsr.detection import DenseDetector, ExactGridDetector
+
+    from .gripper import MAX_OPENING
+
+    if isinstance(detector, DenseDetector | ExactGridDetector):
+        detector = copy.copy(detector)
+        detector.grid = dataclasses.replace(detector.grid, clear_jaws=True,
+                                            max_width=MAX_OPENING)
+        detector.top_k = max(int(top_k), int(detector.top_k))
+        if isinstance(detector, DenseDetector) and detector.rescore:
+            detector.rescore = max(int(detector.rescore), detector.top_k)
+    return GripperAwareDetector(detector, keep=keep)
 
 
 class PluginDetector:

@@ -36,7 +36,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .grasp import Grasp
-from .gripper import TIP_OFFSET, Gripper, GripperParams, pose_from_matrix
+from .gripper import (
+    FINGER_THICKNESS,
+    PAD_WIDTH,
+    TIP_OFFSET,
+    Gripper,
+    GripperParams,
+    pose_from_matrix,
+)
 from .scene import Scene, SceneBodies, build_scene
 
 __all__ = [
@@ -130,8 +137,8 @@ def clamp_to_table(T_world_grasp, table_z: float, clearance: float = 0.003,
     """
     T = np.array(T_world_grasp, dtype=float)
     a = T[:3, 2]
-    half_x = opening / 2 + 0.008
-    lowest = T[2, 3] + TIP_OFFSET * a[2] - 0.01 * abs(T[2, 1]) - half_x * abs(T[2, 0])
+    half_x = opening / 2 + FINGER_THICKNESS
+    lowest = T[2, 3] + TIP_OFFSET * a[2] - PAD_WIDTH / 2 * abs(T[2, 1]) - half_x * abs(T[2, 0])
     gap = lowest - (table_z + clearance)
     if gap < 0 and a[2] < -1e-6:
         T[:3, 3] += (gap / -a[2]) * a  # gap < 0, -a[2] > 0: move back against the approach

@@ -15,9 +15,12 @@ valid depth in the rectangle's central region (the rectangle shrunk to half its 
 its jaw size) -- pushed ``depth_offset`` further along the approach so the pads straddle the
 object's top rather than touch it, but never so deep that the palm, ``PALM_OFFSET`` (4 cm)
 behind the grasp centre, comes within ``palm_clearance`` of the nearest surface seen anywhere in
-the rectangle (:func:`nearest_depth`, a low percentile of its valid depth, robust to a few noisy
-pixels): over an open mug or an upright bottle's shoulder the median lies far below the rim or
-the cap, and a gripper with 5 cm fingers cannot reach that deep around them. The opening is
+the rectangle or under the palm (:func:`nearest_depth`, a low percentile of the valid depth,
+robust to a few noisy pixels, over the rectangle and over the palm's footprint, ``PALM_LENGTH``
+x ``PALM_WIDTH`` about the centre, measured at the surface depth): over an open mug or an
+upright bottle's shoulder the median lies far below the rim or the cap, and a gripper with 5 cm
+fingers cannot reach that deep around them; a small rectangle on a mug's wall leaves the rest of
+the rim under the 11 cm palm. The opening is
 ``w z / f`` (the rectangle's opening measured at that depth) plus ``margin``. When the central
 region holds no valid depth at all, the fallback is explicit: no pose is computed and the grasp
 carries the failure reason ``"depth missing at the centre"``; when ``w z / f`` exceeds the
@@ -33,13 +36,21 @@ import numpy as np
 
 from dlsr.rectangles import GraspRectangle
 
-from .gripper import PALM_OFFSET
+from .gripper import (
+    FINGER_THICKNESS,
+    PAD_WIDTH,
+    PALM_LENGTH,
+    PALM_OFFSET,
+    PALM_WIDTH,
+    TIP_OFFSET,
+)
 
 __all__ = [
     "Grasp",
     "rectangle_to_grasp",
     "central_depth",
     "nearest_depth",
+    "fingers_collide",
     "DEPTH_MISSING",
     "TOO_WIDE",
 ]
@@ -185,6 +196,7 @@ def rectangle_to_grasp(
     margin: float = 0.01,
     max_opening: float = 0.08,
     palm_clearance: float = 0.005,
+    palm_percentile: float = 2.0,
 ) -> Grasp:
     """Turn an image rectangle into a gripper pose.
 
@@ -207,7 +219,11 @@ def rectangle_to_grasp(
         Metres; the gripper's largest opening.
     palm_clearance : float
         Metres the palm (``PALM_OFFSET`` behind the grasp centre) stays short of the nearest
-        surface in the rectangle (:func:`nearest_depth`).
+        surface in the rectangle and under the palm's footprint (:func:`nearest_depth`).
+    palm_percentile : float
+        Percentile of the valid depth under the palm's footprint taken as its nearest surface
+        (lower than the rectangle's 5: the footprint is larger, a mug's rim a smaller part of
+        it).
 
     Returns
     -------
@@ -235,10 +251,74 @@ def rectangle_to_grasp(
     p_cam = z * np.array([(rect.x - cx) / fx, (rect.y - cy) / fy, 1.0])
     T_cam_grasp = np.eye(4)
     T_cam_grasp[:3, 0], T_cam_grasp[:3, 1], T_cam_grasp[:3, 2] = x_cam, y_cam, z_cam
-    # As deep as asked, but the palm stays clear of the nearest surface between the jaws.
-    reach = min(depth_offset, nearest_depth(rect, depth, valid) + PALM_OFFSET - palm_clearance - z)
+    # As deep as asked, but the palm stays clear of the nearest surface between the jaws and
+    # under the palm (its footprint measured at the surface depth z).
+    palm = GraspRectangle(rect.x, rect.y, rect.theta, PALM_LENGTH * fx / z, PALM_WIDTH * fy / z)
+    nearest = min(nearest_depth(rect, depth, valid),
+                  nearest_depth(palm, depth, valid, percentile=palm_percentile))
+    reach = min(depth_offset, nearest + PALM_OFFSET - palm_clearance - z)
     T_cam_grasp[:3, 3] = p_cam + reach * z_cam
     T_world_grasp = T_world_cam @ T_cam_grasp
     opening = float(min(width + margin, max_opening))
     failure = TOO_WIDE if width > max_opening else None
     return Grasp(T_world_grasp, opening, width, float(z), rect, failure)
+
+
+def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_depth=None,
+                    tolerance: float = 0.003, tip_clearance: float = 0.003,
+                    samples: tuple[int, int] = (3, 7)) -> bool:
+    """Whether the open fingers, coming down along the approach, would land on a seen surface.
+
+    A depth-only check a detector can run before proposing a grasp (the gripper's geometry and
+    the observation, nothing of the simulator's state): each finger is a column of
+    ``FINGER_THICKNESS`` x ``PAD_WIDTH`` (closing direction x across) just outside the opening,
+    whose tip ends ``TIP_OFFSET`` beyond the grasp centre, or where the executor stops it, a
+    ``tip_clearance`` above the table (:func:`graspsim.execution.clamp_to_table`). Points of the
+    column's footprint are projected into the image through the grasp's depth; a valid depth
+    there more than ``tolerance`` in front of the tip's final depth is a surface the finger
+    meets on the way down ("collision on approach" in simulation).
+
+    Parameters
+    ----------
+    grasp : Grasp
+        From :func:`rectangle_to_grasp` (a grasp without a pose collides: True).
+    depth : ndarray of shape (H, W), float
+        Metres, 0 where missing.
+    valid : ndarray of shape (H, W), bool
+    intrinsics : CameraIntrinsics or ndarray of shape (3, 3)
+    T_world_cam : ndarray of shape (4, 4)
+    table_depth : ndarray of shape (H, W) or None
+        The table's depth at every pixel, metres (e.g. from
+        :func:`dlsr.detection.table_surface`); None: the tip is not clamped (no table seen).
+    tolerance, tip_clearance : float
+        Metres.
+    samples : (int, int)
+        Footprint points per finger along the closing direction and across it.
+
+    Returns
+    -------
+    bool
+        True also when a footprint point falls outside the image (nothing is known there).
+    """
+    if grasp.T_world_grasp is None:
+        return True
+    K = _intrinsic_matrix(intrinsics)
+    depth = np.asarray(depth, dtype=float)
+    valid = np.asarray(valid, dtype=bool) & np.isfinite(depth) & (depth > 0)
+    H, W = depth.shape
+    T_cam_grasp = np.linalg.inv(np.asarray(T_world_cam, dtype=float)) @ grasp.T_world_grasp
+    R, o = T_cam_grasp[:3, :3], T_cam_grasp[:3, 3]
+    a = (grasp.opening / 2 + np.linspace(0.0, FINGER_THICKNESS, samples[0]))[:, None]
+    b = np.linspace(-PAD_WIDTH / 2, PAD_WIDTH / 2, samples[1])[None, :]
+    A = np.concatenate([a, -a]) * np.ones_like(b)
+    B = np.ones_like(a.repeat(2, axis=0)) * b
+    P = o + A.reshape(-1, 1) * R[:, 0] + B.reshape(-1, 1) * R[:, 1]  # footprint at the TCP
+    u = np.rint(K[0, 0] * P[:, 0] / P[:, 2] + K[0, 2]).astype(np.intp)
+    v = np.rint(K[1, 1] * P[:, 1] / P[:, 2] + K[1, 2]).astype(np.intp)
+    if P[:, 2].min() <= 0 or u.min() < 0 or u.max() >= W or v.min() < 0 or v.max() >= H:
+        return True
+    tip = o[2] + TIP_OFFSET * R[2, 2]
+    if table_depth is not None:
+        tip = min(tip, float(np.min(np.asarray(table_depth)[v, u])) - tip_clearance)
+    ok = valid[v, u]
+    return bool(np.any(depth[v, u][ok] < tip - tolerance))

@@ -24,6 +24,10 @@ __all__ = ["Gripper", "GripperParams", "gripper_urdf", "pose_from_matrix", "matr
 MAX_OPENING = 0.08  #: m, largest opening between the pads.
 TIP_OFFSET = 0.01  #: m, fingertips lie this far beyond the TCP along the approach (+z).
 PALM_OFFSET = 0.04  #: m, the palm's face lies this far behind the TCP (5 cm pads minus the tips).
+FINGER_THICKNESS = 0.008  #: m, each finger's thickness along the closing direction.
+PAD_WIDTH = 0.02  #: m, the pads' width across the closing direction.
+PALM_LENGTH = 0.11  #: m, the palm's length along the closing direction.
+PALM_WIDTH = 0.03  #: m, the palm's width across the closing direction.
 
 
 def gripper_urdf():

@@ -75,6 +75,15 @@ class RunConfig:
     hard_negatives, hard_rounds : int
         Detector training beyond the paper: negatives mined per training image from the
         detector's own best failing candidates, in ``hard_rounds`` rounds (0: none, the paper).
+    grid_negatives : float
+        Negatives per labelled rectangle drawn from the detector's own search grid in training
+        (0: the paper's training, on the labelled rectangles only).
+    gripper_aware : bool
+        In the trials, DLSR searches only rectangles this gripper can execute
+        (:func:`graspsim.detectors.gripper_aware`: jaws beside the object, opening within
+        reach, its best 40 checked against the depth image for fingers landing on a seen
+        surface); the same model with the paper's search then also runs, as ``dlsr-paper``.
+        Not in the paper.
     trials : int
         Simulated grasp trials per detector on the test objects.
     trial_candidates : int
@@ -106,6 +115,8 @@ class RunConfig:
     fit_grid: float | None = None
     hard_negatives: int = 0
     hard_rounds: int = 1
+    grid_negatives: float = 1.0
+    gripper_aware: bool = False
     trials: int = 100
     trial_candidates: int = 32
     baselines: list[str] = field(default_factory=lambda: ["mask-pca", "random", "oracle"])
@@ -123,6 +134,8 @@ class RunConfig:
             raise ValueError(f"encoder must be one of {ENCODERS}, got {self.encoder!r}")
         if self.detector not in ("dense", "exact"):
             raise ValueError(f"detector must be 'dense' or 'exact', got {self.detector!r}")
+        if not self.grid_negatives >= 0:
+            raise ValueError(f"grid_negatives must be >= 0, got {self.grid_negatives}")
         for name in ("scenes", "candidates", "n_atoms", "n_patches", "folds", "trials"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -146,7 +159,7 @@ class RunConfig:
                              f"got {self.baselines!r}")
         seen = set()
         for name in self.baselines:
-            if name == "dlsr" or name in seen:
+            if name in ("dlsr", "dlsr-paper") or name in seen:
                 raise ValueError(f"baselines: {name!r} is listed twice (DLSR always runs)")
             seen.add(name)
             try:
@@ -367,7 +380,8 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
             n_patches=config.n_patches, seed=seeds["detection"], progress=progress,
             coarse_to_fine=config.coarse_to_fine, rescore=config.rescore,
             max_images=config.detection_images, fit_grid=config.fit_grid,
-            hard_negatives=config.hard_negatives, hard_rounds=config.hard_rounds, executor=ex,
+            hard_negatives=config.hard_negatives, hard_rounds=config.hard_rounds,
+            grid_negatives=config.grid_negatives, clear_jaws=config.gripper_aware, executor=ex,
         )
         stages.finish("detection", {
             k: det.get(k) for k in ("accuracy", "baselines", "seconds_per_image")
@@ -383,7 +397,8 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
                                C=config.C, n_atoms=config.n_atoms, n_patches=config.n_patches,
                                random_state=seeds["model"], detector=config.detector,
                                fit_grid=config.fit_grid, hard_negatives=config.hard_negatives,
-                               hard_rounds=config.hard_rounds)
+                               hard_rounds=config.hard_rounds,
+                               grid_negatives=config.grid_negatives)
         model_path.parent.mkdir(parents=True, exist_ok=True)
         paths = model.save(model_path)
         stages.finish("model", {"paths": [str(p) for p in paths],
@@ -418,7 +433,7 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
     from .trials import TrialConfig, run_trials
 
     trial_cfg = TrialConfig(n_candidates=config.trial_candidates, sampler=config.label_sampler)
-    for name in ["dlsr", *config.baselines]:
+    for name in trial_names(config):
         key = f"trials/{name}"
         if stages.done(key):
             continue
@@ -432,14 +447,25 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
         stages.finish(key, s)
 
 
+def trial_names(config: RunConfig) -> list[str]:
+    """The detectors of the trial stage, DLSR first: ``dlsr``, ``dlsr-paper`` (the paper's
+    search, when ``gripper_aware``), then the baselines."""
+    return ["dlsr", *(["dlsr-paper"] if config.gripper_aware else []), *config.baselines]
+
+
 def _trial_detector(name: str, model_path: Path, config: RunConfig):
-    if name == "dlsr":
+    if name in ("dlsr", "dlsr-paper"):
         from dlsr.detection import DLSRDetector
 
         options = {}
         if config.detector == "dense":
             options = {"coarse_to_fine": config.coarse_to_fine, "rescore": config.rescore}
-        return DLSRDetector.load(model_path).detector(config.detector, **options)
+        det = DLSRDetector.load(model_path).detector(config.detector, **options)
+        if name == "dlsr" and config.gripper_aware:
+            from .detectors import gripper_aware
+
+            det = gripper_aware(det)
+        return det
     from .detectors import load_detector
 
     return load_detector(name)

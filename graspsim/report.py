@@ -470,7 +470,9 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
         blocks.append(("md", f.read_text()))
 
     blocks.append(("h2", "Physical grasp success on the test objects"))
-    names = ["dlsr", *config.baselines]
+    from .pipeline import trial_names
+
+    names = trial_names(config)
     rows, tables = [], []
     for name in names:
         s = stages.get(f"trials/{name}")

@@ -122,7 +122,9 @@ from .grid import (  # noqa: F401
     enumerate_candidates,
     jaws_clear,
     object_region,
+    opening_widths,
     table_plane_mask,
+    table_surface,
 )
 from .model import (  # noqa: F401
     FORMAT_VERSION,
@@ -162,7 +164,9 @@ __all__ = [
     "mine_hard_negatives",
     "check_training_options",
     "object_region",
+    "opening_widths",
     "table_plane_mask",
+    "table_surface",
     "background_mask",
     "enumerate_candidates",
     "jaws_clear",

@@ -20,7 +20,15 @@ from ..features import encode_patches
 from ..preprocess import _one_blas_thread
 from ..rectangles import corners_from_array, normalize_angle
 from .exact import Detection, _Base, _check_obs, _empty
-from .grid import COARSE_GRID, PAPER_GRID, SearchGrid, _axes, _box_sums, jaws_clear
+from .grid import (
+    COARSE_GRID,
+    PAPER_GRID,
+    SearchGrid,
+    _axes,
+    _box_sums,
+    jaws_clear,
+    opening_widths,
+)
 from .model import GRID, PATCH, PATCHES_PER_RECTANGLE, SIZE, SPLIT
 
 _ONE = 1.0 - 1e-6  # as dlsr.preprocess: bilinear weights summing to one
@@ -331,7 +339,8 @@ class DenseDetector(_Base):
         _check_obs(obs)
         stats = _new_stats()
         if self.coarse_to_fine:  # the coarse stage keeps the grid's jaw clearance
-            coarse = dataclasses.replace(self.coarse_grid, clear_jaws=self.grid.clear_jaws)
+            coarse = dataclasses.replace(self.coarse_grid, clear_jaws=self.grid.clear_jaws,
+                                         max_width=self.grid.max_width)
             cand, reason, region = self._candidates(obs, coarse)
         else:
             cand, reason, region = self._candidates(obs)
@@ -488,6 +497,8 @@ class DenseDetector(_Base):
         fine = fine[inside]
         if g.clear_jaws and region is not None:
             fine = fine[jaws_clear(region, fine)]
+        if g.max_width is not None and len(fine):
+            fine = fine[opening_widths(obs, fine, region) <= g.max_width]
         return fine
 
     def _padding_code_scores(self, V):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..rectangles import GraspRectangle, array_to_rects
-from .grid import PAPER_GRID, SearchGrid, enumerate_candidates, object_region
+from .grid import PAPER_GRID, SearchGrid, enumerate_candidates, object_region, opening_widths
 from .model import PATCHES_PER_RECTANGLE, DLSRDetector
 
 log = logging.getLogger(__name__)
@@ -95,8 +95,12 @@ class _Base:
             return np.zeros((0, 5)), f"empty object region (method {how})", region
         grid = grid or self.grid
         cand = enumerate_candidates(region, grid)
+        if grid.max_width is not None and len(cand):
+            cand = cand[opening_widths(obs, cand, region) <= grid.max_width]
         if len(cand) == 0:
             what = " with both jaws clear of it" if grid.clear_jaws else ""
+            if grid.max_width is not None:
+                what += f" and an opening of at most {grid.max_width:g} m"
             return cand, (f"no candidate covers the object region enough{what} "
                           f"(method {how})"), region
         return cand, None, region

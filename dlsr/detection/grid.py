@@ -42,6 +42,11 @@ class SearchGrid:
         lies between them (:func:`jaws_clear`). Not in the paper (off by default): without it
         the search also scores rectangles narrower than the object, which a model can rank
         first (e.g. 10 x 10 px on a real remote control's edge).
+    max_width : float or None
+        Metres: keep only the candidates whose opening, measured at the depth under their
+        centre (``w z / f`` with the observation's camera matrix ``K``, :func:`opening_widths`),
+        is at most this (a gripper's largest opening). Needs ``obs["K"]``; None (default, the
+        paper) keeps every size.
     """
 
     angles_deg: tuple = tuple(range(0, 180, 15))
@@ -52,6 +57,7 @@ class SearchGrid:
     min_coverage: float = 0.5
     coverage_on: str = "dilated"
     clear_jaws: bool = False
+    max_width: float | None = None
 
     def pairs(self) -> list[tuple[float, float]]:
         """``(w, h)`` pairs with ``w >= h``."""
@@ -67,6 +73,7 @@ class SearchGrid:
             "min_coverage": float(self.min_coverage),
             "coverage_on": self.coverage_on,
             "clear_jaws": bool(self.clear_jaws),
+            "max_width": None if self.max_width is None else float(self.max_width),
         }
 
     @classmethod
@@ -217,6 +224,36 @@ def _table_surface(depth, valid, degree: int = 3, stride: int = 4, n_iter: int =
     surface = 1.0 / np.maximum(Y.T @ C @ X, 1e-9)
     table = _largest_blob(valid & (np.abs(depth - surface) < max(3.0 * sigma, tol)))
     return surface, table, sigma
+
+
+def table_surface(depth, depth_valid=None, stride: int = 4, n_iter: int = 100,
+                  tol: float = 0.003, random_state=0, degree: int = 3,
+                  band: float = 0.025) -> np.ndarray | None:
+    """The table's depth at every pixel, as :func:`table_plane_mask` fits it.
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W)
+        Metres; values <= 0 or non-finite are missing.
+    depth_valid : ndarray of shape (H, W), bool, or None
+    stride, n_iter, tol, random_state, degree, band :
+        See :func:`table_plane_mask`.
+
+    Returns
+    -------
+    ndarray of shape (H, W), float64, or None
+        Metres (the fitted surface extrapolated over the whole image); None when fewer than 50
+        pixels are valid or no table is found.
+    """
+    depth = np.asarray(depth, dtype=np.float64)
+    valid = np.isfinite(depth) & (depth > 0)
+    if depth_valid is not None:
+        valid &= np.asarray(depth_valid, dtype=bool)
+    if valid.sum() < 50:
+        return None
+    fit = _table_surface(np.where(valid, depth, 1.0), valid, degree, stride, n_iter, tol, band,
+                         random_state)
+    return None if fit is None else fit[0]
 
 
 def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride: int = 4,
@@ -449,6 +486,48 @@ def enumerate_candidates(region: np.ndarray, grid: SearchGrid = PAPER_GRID):
     if grid.clear_jaws:
         cand = cand[jaws_clear(region, cand)]
     return cand
+
+
+def opening_widths(obs: dict, rects, region=None) -> np.ndarray:
+    """The openings of rectangles in metres, measured at the depth under their centres.
+
+    ``w z |(cos(theta) / fx, sin(theta) / fy)|`` (``w z / f`` for square pixels), with ``z`` the
+    valid depth at the centre pixel, or where it is missing the median valid depth of
+    ``region`` (of the whole image when None or empty).
+
+    Parameters
+    ----------
+    obs : dict
+        ``depth`` (H, W) metres, optional ``depth_valid``, and ``K`` (3, 3).
+    rects : ndarray of shape (n, 5)
+    region : ndarray of shape (H, W), bool, or None
+
+    Returns
+    -------
+    ndarray of shape (n,), metres
+    """
+    if obs.get("K") is None:
+        raise ValueError("measuring openings in metres needs the observation's camera matrix "
+                         "'K' (SearchGrid.max_width)")
+    K = np.asarray(obs["K"], dtype=float)
+    if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise ValueError(f"observation 'K' must be a 3x3 camera matrix with positive focal "
+                         f"lengths, got {K.tolist()}")
+    depth = np.asarray(obs["depth"], dtype=float)
+    valid = np.isfinite(depth) & (depth > 0)
+    if obs.get("depth_valid") is not None:
+        valid &= np.asarray(obs["depth_valid"], dtype=bool)
+    rects = np.asarray(rects, dtype=float).reshape(-1, 5)
+    if not valid.any():
+        return np.full(len(rects), np.inf)
+    pool = valid & region if region is not None and (valid & region).any() else valid
+    fallback = float(np.median(depth[pool]))
+    H, W = depth.shape
+    col = np.clip(np.rint(rects[:, 0]).astype(np.intp), 0, W - 1)
+    row = np.clip(np.rint(rects[:, 1]).astype(np.intp), 0, H - 1)
+    z = np.where(valid[row, col], depth[row, col], fallback)
+    scale = np.hypot(np.cos(rects[:, 2]) / K[0, 0], np.sin(rects[:, 2]) / K[1, 1])
+    return rects[:, 3] * z * scale
 
 
 def jaws_clear(region, rects, max_on: float = 0.0, n_samples: int = 17,

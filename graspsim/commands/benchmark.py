@@ -109,6 +109,9 @@ def _register_detection(sub) -> None:
                    help="dense detector: coarse grid first, then the full grid near the best")
     d.add_argument("--rescore", type=int, default=300,
                    help="dense detector: best candidates rescored exactly (0: none)")
+    d.add_argument("--clear-jaws", action="store_true",
+                   help="search only rectangles whose jaws come down beside the object region "
+                        "(not in the paper; detection only, the training is the same)")
     d.add_argument("--region", choices=["auto", "background", "mask", "depth"], default="auto",
                    help="object region: the sample mask when there is one, else depth above "
                         "the table plane")
@@ -153,7 +156,7 @@ def _detection(args: argparse.Namespace) -> int:
         n_patches=args.patches, grid_negatives=args.grid_negatives,
         fit_grid=args.fit_grid, hard_negatives=args.hard_negatives,
         hard_rounds=args.hard_rounds, region=args.region,
-        rescore=args.rescore,
+        rescore=args.rescore, clear_jaws=args.clear_jaws,
         coarse_to_fine=args.coarse_to_fine, max_images=args.max_images,
         n_overlays=args.overlays, save_model=args.save_model,
         extra_patches=args.extra_patches, extra_train=args.extra_train,

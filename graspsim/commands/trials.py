@@ -19,6 +19,11 @@ def register(subparsers) -> None:
                         "factory whose object has predict(obs); the current folder is "
                         "searched too), a name registered in the entry-point group "
                         "graspsim.detectors, or the path of a saved model")
+    p.add_argument("--gripper-aware", action="store_true",
+                   help="keep only the detector's rectangles this gripper can execute, judged "
+                        "from the depth image (opening within reach, fingers not landing on a "
+                        "seen surface); a DLSR model also searches only rectangles whose jaws "
+                        "come down beside the object (not in the paper)")
     p.add_argument("--objects", default="test", choices=["train", "test", "all"])
     p.add_argument("--n", type=int, default=200,
                    help="number of trials (with --declutter: of rounds)")
@@ -52,9 +57,14 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--n must be >= 0, got {args.n}")
     config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler)
     executor = executor_from_args(args)
-    kwargs = dict(detector=args.detector, objects=args.objects, n=args.n, seed=args.seed,
+    detector, name = args.detector, None
+    if args.gripper_aware:
+        from graspsim.detectors import gripper_aware, load_detector
+
+        detector, name = gripper_aware(load_detector(args.detector)), f"{args.detector}+aware"
+    kwargs = dict(detector=detector, objects=args.objects, n=args.n, seed=args.seed,
                   out=args.out, n_jobs=args.jobs, progress=True, config=config,
-                  executor=executor)
+                  executor=executor, detector_name=name)
     if args.declutter:
         from graspsim.declutter import run_rounds
 

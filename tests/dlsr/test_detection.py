@@ -19,6 +19,7 @@ from dlsr.detection import (
     enumerate_candidates,
     jaws_clear,
     object_region,
+    opening_widths,
     table_plane_mask,
 )
 from dlsr.features import Representation, rectangle_features
@@ -224,6 +225,56 @@ def test_search_grid_round_trips_clear_jaws():
     old = grid.to_dict()
     del old["clear_jaws"]  # a model saved before the option: the paper's search
     assert SearchGrid.from_dict(old).clear_jaws is False
+
+
+def test_opening_widths_measure_the_opening_at_the_depth_under_the_centre():
+    f = 200.0
+    obs = {"depth": np.full((H, W), 0.8, np.float32), "depth_valid": np.ones((H, W), bool),
+           "K": np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1.0]])}
+    obs["depth"][40:80, 60:100] = 0.6
+    obs["depth_valid"][10, 10] = False  # a hole: the region's (else the image's) median depth
+    rects = np.array([[80, 60, 0.0, 40, 10], [20, 20, np.pi / 2, 40, 10],
+                      [10, 10, 0.3, 40, 10]])
+    widths = opening_widths(obs, rects)
+    np.testing.assert_allclose(widths[:2], [40 * 0.6 / f, 40 * 0.8 / f], rtol=1e-6)
+    region = np.zeros((H, W), bool)
+    region[40:80, 60:100] = True
+    assert opening_widths(obs, rects[2:], region)[0] == pytest.approx(40 * 0.6 / f, rel=1e-6)
+    # Non-square pixels: the closing direction's own focal length.
+    obs2 = dict(obs, K=np.array([[f, 0, W / 2], [0, 2 * f, H / 2], [0, 0, 1.0]]))
+    assert opening_widths(obs2, rects[1:2])[0] == pytest.approx(40 * 0.8 / (2 * f), rel=1e-6)
+    with pytest.raises(ValueError, match="'K'"):
+        opening_widths({k: v for k, v in obs.items() if k != "K"}, rects)
+    with pytest.raises(ValueError, match="camera matrix"):
+        opening_widths(dict(obs, K=np.zeros((3, 3))), rects)
+
+
+def test_max_width_grid_drops_the_openings_a_gripper_cannot_reach(bar_model):
+    model, _ = bar_model
+    obs = dict(_scene(seed=3), K=np.array([[400.0, 0, W / 2], [0, 400.0, H / 2], [0, 0, 1]]))
+    det = ExactGridDetector(model, grid=SMALL_GRID)
+    every, _ = det.candidates(obs)
+    det.grid = dataclasses.replace(SMALL_GRID, max_width=0.06)  # 30 px at 0.77 m is 0.058 m
+    kept, reason = det.candidates(obs)
+    assert reason is None and 0 < len(kept) < len(every)
+    assert kept[:, 3].max() <= 30 and every[:, 3].max() == 40
+    assert {tuple(r) for r in kept} <= {tuple(r) for r in every}
+    dense = DenseDetector(model, grid=det.grid, rescore=10, top_k=50, coarse_to_fine=True,
+                          coarse_grid=dataclasses.replace(SMALL_GRID, step=12.0))
+    assert dense.detect(obs).rects[:, 3].max() <= 30
+    det.grid = dataclasses.replace(SMALL_GRID, max_width=0.01)
+    kept, reason = det.candidates(obs)
+    assert len(kept) == 0 and "at most 0.01 m" in reason
+    with pytest.raises(ValueError, match="'K'"):
+        ExactGridDetector(model, grid=det.grid).candidates(_scene(seed=3))
+
+
+def test_search_grid_round_trips_max_width():
+    grid = SearchGrid(openings=(30, 40), max_width=0.08)
+    assert SearchGrid.from_dict(grid.to_dict()) == grid
+    old = grid.to_dict()
+    del old["max_width"]  # a model saved before the option: every size
+    assert SearchGrid.from_dict(old).max_width is None
 
 
 def test_background_subtraction_region():

@@ -59,3 +59,61 @@ def test_random_is_seeded_by_obs_and_oracle_needs_labels():
     assert RandomDetector().predict(obs) != RandomDetector().predict({**obs, "seed": 5})
     with pytest.raises(ValueError, match="positives"):
         OracleDetector().predict({"depth": obs["depth"]})
+
+
+def _look_down_obs(height=0.75):
+    """A box 6 cm tall (40 x 120 px at the top) on a table 0.75 m under a camera looking
+    straight down, with its pinhole camera."""
+    from tests.graspsim.test_grasp import K, look_down
+
+    depth = np.full((480, 640), height, np.float32)
+    depth[220:260, 260:380] = height - 0.06  # long axis along the image x
+    return {"rgb": np.zeros((480, 640, 3), np.uint8), "depth": depth,
+            "depth_valid": np.ones((480, 640), np.uint8), "K": K,
+            "T_world_cam": look_down(height), "seed": 0}
+
+
+class _Fixed:
+    def __init__(self, rects):
+        self.rects = rects
+
+    def predict(self, obs):
+        return list(self.rects)
+
+
+def test_gripper_aware_keeps_the_executable_rectangles_in_order():
+    from dlsr.rectangles import GraspRectangle
+    from graspsim.detectors import GripperAwareDetector, executable
+
+    obs = _look_down_obs()
+    up = np.pi / 2  # closing along the image y axis: across the box
+    on_top = GraspRectangle(320, 240, up, 20, 20)  # fingers land on the box
+    too_wide = GraspRectangle(320, 240, 0.0, 140, 20)  # 140 px at 0.69 m: 18 cm
+    across = GraspRectangle(320, 240, up, 52, 20)  # fingers beside the box
+    across2 = GraspRectangle(300, 240, up, 56, 20)
+    off_image = GraspRectangle(320, 5, up, 52, 20)  # a finger above the top edge
+    rects = [on_top, too_wide, across, off_image, across2]
+    assert executable(rects, obs).tolist() == [False, False, True, False, True]
+    det = GripperAwareDetector(_Fixed(rects), keep=1)
+    assert det.predict(obs) == [across]
+    assert GripperAwareDetector(_Fixed(rects)).predict(obs) == [across, across2]
+    assert GripperAwareDetector(_Fixed([on_top])).predict(obs) == []
+    assert GripperAwareDetector(_Fixed([])).predict(obs) == []
+    with pytest.raises(ValueError, match="'K'"):
+        executable(rects, {k: v for k, v in obs.items() if k != "K"})
+
+
+def test_gripper_aware_tells_a_dlsr_detector_to_search_clear_jaws_within_reach(saved_model):
+    from dlsr.detection import DLSRDetector
+    from graspsim.detectors import GripperAwareDetector, gripper_aware
+    from graspsim.gripper import MAX_OPENING
+
+    path, _ = saved_model
+    inner = DLSRDetector.load(path).detector()
+    det = gripper_aware(inner, top_k=30)
+    assert isinstance(det, GripperAwareDetector)
+    assert det.detector.grid.clear_jaws and det.detector.grid.max_width == MAX_OPENING
+    assert det.detector.top_k == 30 and det.detector.rescore >= 30
+    assert not inner.grid.clear_jaws and inner.grid.max_width is None  # not changed
+    other = gripper_aware(MaskPCADetector())
+    assert isinstance(other.detector, MaskPCADetector)

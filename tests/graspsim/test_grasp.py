@@ -10,10 +10,11 @@ from graspsim.grasp import (
     DEPTH_MISSING,
     TOO_WIDE,
     central_depth,
+    fingers_collide,
     nearest_depth,
     rectangle_to_grasp,
 )
-from graspsim.gripper import PALM_OFFSET
+from graspsim.gripper import PALM_OFFSET, TIP_OFFSET
 
 F, CX, CY = 550.0, 319.5, 239.5
 K = np.array([[F, 0, CX], [0, F, CY], [0, 0, 1.0]])
@@ -177,3 +178,63 @@ def test_nearest_depth_ignores_a_few_noisy_pixels_but_not_a_rim():
     assert np.isnan(nearest_depth(rect, depth, np.zeros_like(valid)))
     with pytest.raises(ValueError, match="percentile"):
         nearest_depth(rect, depth, valid, percentile=101.0)
+
+
+def test_the_palm_stays_clear_of_a_rim_outside_the_rectangle():
+    """A small rectangle on the floor of a wide open box: the walls lie outside the rectangle
+    but under the 11 cm palm, so the grasp is no deeper than the palm allows."""
+    depth, valid = flat(0.75)
+    depth[180:300, 240:400] = 0.70  # the box's floor (5 cm above the table)
+    depth[180:300, 280:290] = 0.64  # one wall, 4-5 cm from the centre: under the palm
+    rect = GraspRectangle(CX, CY, 0.0, 20.0, 10.0)
+    g = rectangle_to_grasp(rect, depth, valid, K, look_down(0.75))
+    assert 0.75 - g.position[2] == pytest.approx(0.64 + PALM_OFFSET - 0.005, abs=1e-6)
+    # Turned a quarter, the palm's length runs between the walls: the full depth offset.
+    g2 = rectangle_to_grasp(GraspRectangle(CX, CY, np.pi / 2, 20.0, 10.0), depth, valid, K,
+                            look_down(0.75))
+    assert 0.75 - g2.position[2] == pytest.approx(0.70 + 0.015, abs=1e-6)
+
+
+def _block(top=0.65, cols=(300, 340), rows=(200, 280)):
+    """A block standing on a table 0.75 m below a camera looking straight down."""
+    depth, valid = flat(0.75)
+    depth[rows[0]:rows[1], cols[0]:cols[1]] = top
+    return depth, valid
+
+
+def test_fingers_beside_the_object_do_not_collide_and_fingers_on_it_do():
+    depth, valid = _block()  # 40 px = 4.7 cm wide at the top (0.65 m)
+    table = np.full(depth.shape, 0.75)
+    across = GraspRectangle(CX, CY, 0.0, 52.0, 20.0)  # jaws beside the block's x sides
+    g = rectangle_to_grasp(across, depth, valid, K, look_down(0.75))
+    assert g.failure is None
+    assert not fingers_collide(g, depth, valid, K, look_down(0.75), table)
+    narrow = GraspRectangle(CX, CY, 0.0, 20.0, 20.0)  # fingers come down on the block's top
+    g = rectangle_to_grasp(narrow, depth, valid, K, look_down(0.75))
+    assert fingers_collide(g, depth, valid, K, look_down(0.75), table)
+    # ... unless the surface there is missing (nothing seen, nothing to collide with).
+    hidden = valid.copy()
+    hidden[200:280, 300:340] = False
+    assert not fingers_collide(g, depth, hidden, K, look_down(0.75), table)
+
+
+def test_fingers_stop_at_the_table_so_flat_objects_are_not_collisions():
+    depth, valid = _block(top=0.742)  # an 8 mm thin object: the tips would go under the table
+    rect = GraspRectangle(CX, CY, 0.0, 52.0, 20.0)
+    g = rectangle_to_grasp(rect, depth, valid, K, look_down(0.75))
+    tip = 0.75 - g.position[2] + TIP_OFFSET
+    assert tip > 0.75 + 0.003  # below the table surface if nothing stopped it
+    assert fingers_collide(g, depth, valid, K, look_down(0.75))  # no table known: the table
+    table = np.full(depth.shape, 0.75)
+    assert not fingers_collide(g, depth, valid, K, look_down(0.75), table)
+
+
+def test_fingers_outside_the_image_or_without_a_pose_collide():
+    depth, valid = flat(0.75)
+    g = rectangle_to_grasp(GraspRectangle(5.0, CY, 0.0, 40.0, 20.0), depth, valid, K,
+                           look_down(0.75))
+    assert fingers_collide(g, depth, valid, K, look_down(0.75))
+    none = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth,
+                              np.zeros_like(valid), K, look_down(0.75))
+    assert none.T_world_grasp is None
+    assert fingers_collide(none, depth, valid, K, look_down(0.75))
