@@ -16,8 +16,11 @@ Sequence (VGN-like, 1/240 s steps):
 The pre-grasp teleport and the brisk motions (a constraint with a bounded ``maxForce`` moving its
 target several millimetres per step) replace a slow arm trajectory; contacts stay physical.
 
-The grasp centre is kept at least ``tip_clearance`` above the table for the fingertips (a robot
-knows its table plane); the approach direction is unchanged.
+The grasp is moved back along its approach until the fingertips are at least ``tip_clearance``
+(1 mm) above the table (a robot knows its table plane); the approach direction is unchanged. With
+3 mm the pads ended above the lower edge of anything thinner than about 8 mm lying on the table
+(pybullet also keeps resting bodies about 1 mm above it) and their tip edge pressed the object's
+lower flank, squeezing a 6.4 mm stick down and out from under the fingertips.
 
 Labelling many candidates in one scene has a faster path (:func:`precheck_grasps`, used by
 :func:`graspsim.labelling.label_rectangles`): with the scene built once and the open gripper
@@ -79,7 +82,7 @@ class ExecutionParams:
     hold_time: float = 1.0
     close_time: float = 0.6
     success_height: float = 0.10
-    tip_clearance: float = 0.003
+    tip_clearance: float = 0.001
     arrive_steps: int = 48
     gripper: GripperParams = field(default_factory=GripperParams)
     hold_until_still: bool = False
@@ -127,7 +130,7 @@ class GraspResult:
         }
 
 
-def clamp_to_table(T_world_grasp, table_z: float, clearance: float = 0.003,
+def clamp_to_table(T_world_grasp, table_z: float, clearance: float = 0.001,
                    opening: float = 0.08) -> np.ndarray:
     """Move the grasp back along its approach until the fingertips clear the table.
 

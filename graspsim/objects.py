@@ -24,12 +24,51 @@ __all__ = [
     "random_urdf_objects",
     "folder_objects",
     "GRIPPER_OPENING",
+    "MIN_INERTIA_RATIO",
+    "condition_inertia",
 ]
 
 logger = logging.getLogger(__name__)
 
 #: Maximum opening of graspsim's gripper (m); the ``graspable`` flag is relative to it.
 GRIPPER_OPENING = 0.08
+
+#: Smallest principal moment of inertia a body is simulated with, as a fraction of its largest
+#: (see :func:`condition_inertia`).
+MIN_INERTIA_RATIO = 0.01
+
+
+def condition_inertia(inertia, min_ratio: float = MIN_INERTIA_RATIO) -> np.ndarray:
+    """Raise the principal moments of inertia to at least ``min_ratio`` times the largest.
+
+    pybullet's sequential-impulse solver handles a body whose inertia is very anisotropic badly:
+    a long thin stick (the chopstick, 6.4 mm square and 23 cm long: roll moment 1.5e-3 of its
+    largest) squeezed by the pads rolls by 20-45 degrees within the close, far more than
+    rigid-body contact allows, and is then pressed under the fingertips or out of the jaws. The
+    same remedy is built into other engines: MuJoCo's compiler has a lower bound on inertia
+    (``compiler/boundinertia``) and Unreal's Chaos solver raises the inertia of long, thin
+    bodies for the solver ("inertia conditioning"). The floor only changes rods thinner than
+    about 1/14 of their length (a solid square rod: roll/tumble moment = 2 (t/L)^2); in the
+    built-in set the pen, pencil, stick and chopstick (roll moment x1.6 to x6.5), nothing else.
+
+    Parameters
+    ----------
+    inertia : array-like of shape (3,)
+        Principal moments (kg m^2), all >= 0.
+    min_ratio : float
+        In [0, 1]; 0 leaves the moments as they are.
+
+    Returns
+    -------
+    ndarray of shape (3,)
+        ``max(inertia, min_ratio * max(inertia))``, a new array.
+    """
+    inertia = np.asarray(inertia, dtype=float)
+    if inertia.shape != (3,) or not np.all(np.isfinite(inertia)) or np.any(inertia < 0):
+        raise ValueError(f"inertia must be 3 finite moments >= 0, got {inertia.tolist()}")
+    if not 0.0 <= min_ratio <= 1.0:
+        raise ValueError(f"min_ratio must be in [0, 1], got {min_ratio}")
+    return np.maximum(inertia, min_ratio * inertia.max())
 
 
 def assets_dir() -> Path:
@@ -124,7 +163,10 @@ def builtin_objects(split: str = "all") -> list[ObjectSpec]:
 
 
 def load_object(client, spec: ObjectSpec, position, orientation=(0.0, 0.0, 0.0, 1.0)) -> int:
-    """Load ``spec`` into a pybullet client and set its mass and friction.
+    """Load ``spec`` into a pybullet client and set its mass, inertia and friction.
+
+    The principal moments of inertia are floored at ``MIN_INERTIA_RATIO`` times the largest
+    (:func:`condition_inertia`).
 
     Parameters
     ----------
@@ -147,11 +189,13 @@ def load_object(client, spec: ObjectSpec, position, orientation=(0.0, 0.0, 0.0, 
         str(spec.urdf), list(position), list(orientation), globalScaling=spec.scale, flags=flags
     )
     # Setting the mass alone makes pybullet recompute the inertia from the collision shape, so
-    # the inertia diagonal is passed along, scaled by the mass ratio.
+    # the inertia diagonal is passed along, scaled by the mass ratio and floored relative to
+    # its largest moment (condition_inertia: the solver's limit on thin rods).
     info = client.getDynamicsInfo(body, -1)
     old_mass, inertia = info[0], np.asarray(info[2], dtype=float)
     if old_mass > 0:
         inertia = inertia * (spec.mass / old_mass)
+    inertia = condition_inertia(inertia)
     client.changeDynamics(
         body, -1, mass=spec.mass, localInertiaDiagonal=inertia.tolist(),
         lateralFriction=spec.friction, spinningFriction=0.002, rollingFriction=0.0005,

@@ -17,10 +17,12 @@ from pybullet_utils.bullet_client import BulletClient  # noqa: E402
 
 from graspsim.objects import (  # noqa: E402
     GRIPPER_OPENING,
+    MIN_INERTIA_RATIO,
     ObjectSpec,
     _obj_bounds,
     assets_dir,
     builtin_objects,
+    condition_inertia,
     folder_objects,
     load_object,
     random_urdf_objects,
@@ -161,6 +163,40 @@ def test_load_object_sets_mass_friction_and_file_inertia(client):
     assert inertia.min() < 0.2 * inertia.max()
     with pytest.raises(FileNotFoundError):
         load_object(client, ObjectSpec("ghost", Path("/nonexistent/ghost.urdf")), (0, 0, 0))
+
+
+def test_condition_inertia_floors_a_thin_rod_and_leaves_a_box():
+    # a solid square rod 4 mm x 4 mm x 20 cm, 10 g: roll moment m t^2 / 6, tumble m L^2 / 12
+    m, t, length = 0.01, 0.004, 0.2
+    rod = np.array([m * t**2 / 6, m * (length**2 + t**2) / 12, m * (length**2 + t**2) / 12])
+    before = rod.copy()
+    out = condition_inertia(rod)
+    assert np.array_equal(rod, before)  # input untouched
+    assert out[0] == pytest.approx(MIN_INERTIA_RATIO * rod.max())
+    assert out[1:] == pytest.approx(rod[1:])
+    box = np.array([2e-5, 3e-5, 4e-5])
+    assert np.array_equal(condition_inertia(box), box)
+    assert np.array_equal(condition_inertia(rod, min_ratio=0.0), rod)
+    for bad in ([1e-6, 1e-6], [1e-6, -1e-6, 1e-6], [np.nan, 1e-6, 1e-6]):
+        with pytest.raises(ValueError, match="inertia"):
+            condition_inertia(bad)
+    with pytest.raises(ValueError, match="min_ratio"):
+        condition_inertia(box, min_ratio=1.5)
+
+
+def test_load_object_floors_the_chopsticks_roll_inertia_only(client):
+    specs = {s.name: s for s in builtin_objects()}
+    for name, floored in (("chopstick", True), ("box_small", False)):
+        s = specs[name]
+        raw = client.loadURDF(str(s.urdf), flags=client.URDF_USE_INERTIA_FROM_FILE)
+        info = client.getDynamicsInfo(raw, -1)
+        file_inertia = np.array(info[2]) * (s.mass / info[0])
+        inertia = np.array(client.getDynamicsInfo(load_object(client, s, (0, 0, 0.1)), -1)[2])
+        assert (file_inertia.min() < MIN_INERTIA_RATIO * file_inertia.max()) == floored
+        assert inertia.min() >= MIN_INERTIA_RATIO * inertia.max() * (1 - 1e-6)
+        assert inertia.max() == pytest.approx(file_inertia.max(), rel=1e-6)
+        if not floored:
+            assert inertia == pytest.approx(file_inertia, rel=1e-6)
 
 
 def test_mug_is_hollow(client):
