@@ -265,7 +265,7 @@ def rectangle_to_grasp(
 
 
 def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_depth=None,
-                    tolerance: float = 0.003, tip_clearance: float = 0.003,
+                    tolerance: float = 0.003, tip_clearance: float = 0.001,
                     samples: tuple[int, int] = (3, 7)) -> bool:
     """Whether the open fingers, coming down along the approach, would land on a seen surface.
 
@@ -291,7 +291,7 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
         The table's depth at every pixel, metres (e.g. from
         :func:`dlsr.detection.table_surface`); None: the tip is not clamped (no table seen).
     tolerance, tip_clearance : float
-        Metres.
+        Metres (``tip_clearance`` as :class:`graspsim.execution.ExecutionParams`).
     samples : (int, int)
         Footprint points per finger along the closing direction and across it.
 
