@@ -99,8 +99,8 @@ class RunConfig:
     name: str = "default"
     seed: int = 0
     scenes: int = 60
-    candidates: int = 48
-    label_sampler: str = "mixed"
+    candidates: int = 64
+    label_sampler: str = "dense"
     learner: str = "NKM"
     encoder: str = "Natural"
     n_atoms: int = 200
@@ -115,8 +115,8 @@ class RunConfig:
     fit_grid: float | None = None
     hard_negatives: int = 0
     hard_rounds: int = 1
-    grid_negatives: float = 1.0
-    gripper_aware: bool = False
+    grid_negatives: float = 0.0
+    gripper_aware: bool = True
     trials: int = 100
     trial_candidates: int = 32
     baselines: list[str] = field(default_factory=lambda: ["mask-pca", "random", "oracle"])

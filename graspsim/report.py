@@ -444,6 +444,16 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
                         f"synthetic Cornell images of the built-in train objects; simulated "
                         f"grasp trials on the held-out test objects. Seed {config.seed}."
                    + (f" Wall time {wall / 60:.1f} min." if wall else "")))
+    training = ("the paper's training (labelled rectangles only)" if not config.grid_negatives
+                else f"{config.grid_negatives:g} negative(s) per labelled rectangle from its "
+                     f"own search grid")
+    search = ("gripper-aware search (not in the paper): only rectangles whose jaws come down "
+              "beside the object with an opening the gripper reaches, and of its best 40 the "
+              "first whose fingers land on no surface seen in the depth image; `dlsr-paper` "
+              "is the same model with the paper's search" if config.gripper_aware
+              else "the paper's search")
+    blocks.append(("p", f"DLSR: {training}; {search}. Labels: {config.label_sampler} "
+                        f"candidates, {config.candidates} per image."))
 
     rec = stages.get("recognition")
     det = stages.get("detection") or {}

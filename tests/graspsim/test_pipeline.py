@@ -33,10 +33,10 @@ def test_run_writes_every_stage_and_the_report(tiny_run):
     out, report = tiny_run
     stages = json.loads((out / "stages.json").read_text())
     assert set(stages) == {"dataset", "recognition", "detection", "model", "trials/dlsr",
-                           "trials/mask-pca"}
+                           "trials/dlsr-paper", "trials/mask-pca"}
     assert stages["dataset"]["images"] == 6
     assert 0.0 <= stages["recognition"]["accuracy"] <= 1.0
-    for name in ("dlsr", "mask-pca"):
+    for name in ("dlsr", "dlsr-paper", "mask-pca"):
         s = stages[f"trials/{name}"]
         assert s["n"] == 3 and 0 <= s["successes"] <= 3
         assert len((out / "trials" / name / "trials.jsonl").read_text().splitlines()) == 3
@@ -45,10 +45,13 @@ def test_run_writes_every_stage_and_the_report(tiny_run):
     # the detector training options reach the detection benchmark and the final model
     det = json.loads((out / "detection" / "detection.json").read_text())
     assert (det["config"]["fit_grid"], det["config"]["hard_negatives"]) == (0.05, 2)
+    assert det["config"]["clear_jaws"] is True  # gripper-aware: the offline search too
+    assert det["config"]["grid_negatives"] == pipeline.RunConfig().grid_negatives
     model = json.loads((out / "model" / "dlsr.json").read_text())
     assert (model["config"]["fit_grid"], model["config"]["hard_negatives"]) == (0.05, 2)
     md = report.read_text()
     assert "Physical grasp success" in md and "| dlsr |" in md and "| mask-pca |" in md
+    assert "| dlsr-paper |" in md and "gripper-aware search" in md
     assert "DLSR against each baseline, scene by scene" in md and "| mask-pca | 3 |" in md
     assert (out / "pictures" / "success_rates.png").exists()
     html = (out / "report.html").read_text()
