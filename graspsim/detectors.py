@@ -359,6 +359,11 @@ class GripperAwareDetector:
         self.keep = keep
         self.tolerance = tolerance
 
+    @property
+    def requires_labels(self) -> bool:
+        """As the wrapped detector (an oracle needs the scene's labels)."""
+        return bool(getattr(self.detector, "requires_labels", False))
+
     def predict(self, obs) -> list[GraspRectangle]:
         rects, _ = check_detections(self.detector.predict(obs), type(self.detector).__name__)
         if not rects:

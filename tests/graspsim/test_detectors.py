@@ -116,4 +116,5 @@ def test_gripper_aware_tells_a_dlsr_detector_to_search_clear_jaws_within_reach(s
     assert det.detector.top_k == 30 and det.detector.rescore >= 30
     assert not inner.grid.clear_jaws and inner.grid.max_width is None  # not changed
     other = gripper_aware(MaskPCADetector())
-    assert isinstance(other.detector, MaskPCADetector)
+    assert isinstance(other.detector, MaskPCADetector) and not other.requires_labels
+    assert gripper_aware(OracleDetector()).requires_labels  # the harness then labels the scene

@@ -159,6 +159,16 @@ def test_trials_cli(tmp_path, capsys):
                  "--candidates", "0", "--out", str(out)]) == 0
     assert len((out / "trials.jsonl").read_text().splitlines()) == 2
     assert json.loads((out / "summary.json").read_text())["n"] == 2
+    # --gripper-aware wraps the detector: the same scenes, every proposal executable.
+    aware = tmp_path / "aware"
+    assert main(["trials", "--detector", "mask-pca", "--gripper-aware", "--objects", "test",
+                 "--n", "2", "--candidates", "0", "--out", str(aware)]) == 0
+    assert json.loads((aware / "config.json").read_text())["detector"] == "mask-pca+aware"
+    plain = [json.loads(x) for x in (out / "trials.jsonl").read_text().splitlines()]
+    wrapped = [json.loads(x) for x in (aware / "trials.jsonl").read_text().splitlines()]
+    assert [r["object"] for r in plain] == [r["object"] for r in wrapped]
+    assert all(r["rectangle"] is None or r["reason"] != "too wide for the gripper"
+               for r in wrapped)
     # The executor flags of every long command.
     assert main(["trials", "--detector", "mask-pca", "--n", "1", "--address", "127.0.0.1:1",
                  "--out", str(tmp_path / "y")]) == 2
