@@ -137,8 +137,13 @@ def trial_streams(seed: int, index: int) -> dict:
     }
 
 
-def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1):
+def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile=None):
     """Build trial ``index``'s seeded scene in ``sim`` and take its observation.
+
+    ``profile`` (a :class:`graspsim.profiles.SimProfile` or a name in
+    :data:`graspsim.profiles.PROFILES`; None for the default) sets the camera height and
+    intrinsics, table colour, lighting ranges and depth noise; the objects and their poses are
+    the same under every profile.
 
     Returns
     -------
@@ -149,10 +154,15 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1):
         The trial's generators (:func:`trial_streams`); ``"label"`` and ``"detector_seed"``
         are still unused.
     """
+    from .profiles import get_profile
+
+    prof = get_profile(profile)
     st = trial_streams(seed, index)
-    scene = make_scene(sim, specs, st["scene"], n_objects=n_objects)
+    scene = make_scene(sim, specs, st["scene"], n_objects=n_objects, table=prof.table)
     bodies = build_scene(sim, scene)
-    frame = capture(sim, scene, bodies, st["camera"])
+    frame = capture(sim, scene, bodies, st["camera"], noise=prof.depth_noise,
+                    intrinsics=prof.intrinsics, height=prof.camera_height,
+                    lighting=prof.lighting)
     return scene, bodies, frame, st
 
 
