@@ -92,12 +92,17 @@ class TrialConfig:
     sampler : {"mixed", "dense"}
         How labelling candidates are drawn (:func:`graspsim.labelling.sample_candidates`;
         ``"dense"`` takes ``n_candidates`` as its budget).
+    profile : str
+        How scenes are seen: a name in :data:`graspsim.profiles.PROFILES` (camera height and
+        intrinsics, table colour, lighting, depth noise); the objects and poses of trial ``i``
+        do not depend on it.
     """
 
     n_candidates: int = 32
     n_objects: int = 1
     label_with_clean_depth: bool = False
     sampler: str = "mixed"
+    profile: str = "default"
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -160,10 +165,19 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile
     st = trial_streams(seed, index)
     scene = make_scene(sim, specs, st["scene"], n_objects=n_objects, table=prof.table)
     bodies = build_scene(sim, scene)
-    frame = capture(sim, scene, bodies, st["camera"], noise=prof.depth_noise,
-                    intrinsics=prof.intrinsics, height=prof.camera_height,
-                    lighting=prof.lighting)
+    frame = profile_capture(sim, scene, bodies, st["camera"], prof)
     return scene, bodies, frame, st
+
+
+def profile_capture(sim, scene, bodies, rng, profile=None):
+    """:func:`graspsim.scene.capture` with a profile's camera height, intrinsics, lighting
+    ranges and depth noise (``profile``: a :class:`graspsim.profiles.SimProfile`, a name, or
+    None for the default)."""
+    from .profiles import get_profile
+
+    prof = get_profile(profile)
+    return capture(sim, scene, bodies, rng, noise=prof.depth_noise, intrinsics=prof.intrinsics,
+                   height=prof.camera_height, lighting=prof.lighting)
 
 
 _WORKER = {}
@@ -315,7 +329,8 @@ def run_trial(sim, specs, detector, seed: int, index: int,
         When the detector's return value breaks the protocol (the message names the trial).
     """
     t0 = time.perf_counter()
-    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects)
+    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects,
+                                             config.profile)
     positives, n_labelled, (rects, scores, error, planning) = _label_and_propose(
         sim, scene, frame, bodies, st, detector, config, params, name,
         f"trial {index} (seed {seed})")

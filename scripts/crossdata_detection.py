@@ -17,7 +17,7 @@ All runs go through :func:`graspsim.benchmarks.detection_benchmark` and resume i
 
 Usage: python scripts/crossdata_detection.py --sim runs/sim_train [--out runs/crossdata]
        [--data ../shared/data/jacquard_samples --format jacquard] [--rows sim_to_real real_cv
-       sim_plus_real_cv] [--grid-negatives 1] [--jobs 1]
+       sim_plus_real_cv] [--grid-negatives 1] [--coarse-to-fine] [--jobs 1]
 """
 
 from __future__ import annotations
@@ -52,13 +52,15 @@ def main(argv=None):
     ap.add_argument("--grid-negatives", type=float, default=1.0,
                     help="training negatives from the search grid per labelled rectangle "
                          "(0: the paper's training)")
+    ap.add_argument("--coarse-to-fine", action="store_true",
+                    help="the dense detector's coarse-to-fine search (about 4x faster)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     ex = Executor("sequential" if args.jobs == 1 else "loky", n_jobs=args.jobs, progress=False)
     common = dict(scale=args.scale, learner=args.learner, encoder=args.encoder, seed=args.seed,
-                  executor=ex)
+                  coarse_to_fine=args.coarse_to_fine, executor=ex)
     training = dict(grid_negatives=args.grid_negatives)
     runs, seconds = {}, {}
     for row in args.rows:

@@ -17,9 +17,12 @@ Variants (one setting changed at a time; ``graspsim.profiles.SimProfile`` fields
 - ``default``: the simulator's defaults;
 - ``closer``: the camera 0.40-0.50 m above the table instead of 0.6-0.8 m (objects about
   1.5x larger in pixels);
+- ``farther``: the camera 1.0-1.3 m above the table (labelled grasp openings about as wide in
+  pixels as Jacquard's at the scale the detector reads them);
 - ``clean_depth``: no depth noise or dropout (``DepthNoise.off()``);
 - ``jacquard_look``: Jacquard's appearance: light grey table, even light without cast
   shadows (the built-in ``jacquard`` profile);
+- ``grey_table``: the grey table alone (default lights);
 - ``combined``: ``closer`` and ``jacquard_look`` together (with ``--variants``).
 
 Usage: python scripts/sim_settings_study.py measure [--scenes 20] [--out runs/sim_settings]
@@ -45,8 +48,10 @@ DEFAULT = PROFILES["default"]
 VARIANTS: dict[str, SimProfile] = {
     "default": DEFAULT,
     "closer": replace(DEFAULT, name="closer", camera_height=(0.40, 0.50)),
+    "farther": replace(DEFAULT, name="farther", camera_height=(1.0, 1.3)),
     "clean_depth": replace(DEFAULT, name="clean_depth", depth_noise=DepthNoise.off()),
     "jacquard_look": replace(PROFILES["jacquard"], name="jacquard_look"),
+    "grey_table": replace(DEFAULT, name="grey_table", table="grey"),
     "combined": replace(PROFILES["jacquard"], name="combined", camera_height=(0.40, 0.50)),
 }
 
@@ -139,6 +144,7 @@ def study(args) -> dict:
         out = args.out / f"x_{name}"
         crossdata_detection.main(["--sim", str(ds), "--rows", "sim_to_real", "--out", str(out),
                                   "--grid-negatives", str(args.grid_negatives),
+                                  *([] if args.full_search else ["--coarse-to-fine"]),
                                   "--jobs", str(args.jobs), "--data", args.data])
         runs[name] = json.loads((out / "sim_to_real" / "detection.json").read_text())
         info[name] = {"images": stats["images"], "positives": stats["positives"],
@@ -170,13 +176,16 @@ def study(args) -> dict:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("part", choices=["measure", "study"])
-    ap.add_argument("--variants", nargs="+", default=["default", "closer", "clean_depth",
-                                                      "jacquard_look"], choices=list(VARIANTS))
+    ap.add_argument("--variants", nargs="+", default=["default", "closer", "farther",
+                                                      "clean_depth", "jacquard_look"],
+                    choices=list(VARIANTS))
     ap.add_argument("--scenes", type=int, default=None,
                     help="scenes per variant (measure: 20, study: 80)")
     ap.add_argument("--candidates", type=int, default=128)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--grid-negatives", type=float, default=0.0)
+    ap.add_argument("--full-search", action="store_true",
+                    help="the dense detector's full search (default: coarse-to-fine, ~4x faster)")
     ap.add_argument("--data", default=str(REPO.parent / "shared" / "data" / "jacquard_samples"))
     ap.add_argument("--cornell", default=str(REPO.parent / "shared" / "data" /
                                              "cornell_samples"))

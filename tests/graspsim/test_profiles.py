@@ -138,3 +138,22 @@ def test_cli_dataset_refuses_an_unknown_profile(capsys):
         main(["dataset", "--scenes", "1", "--out", "x", "--profile", "nope"])
     assert e.value.code == 2
     assert "invalid choice: 'nope'" in capsys.readouterr().err
+
+
+@pytest.mark.sim
+def test_trials_run_under_a_profile_on_the_same_scenes(tmp_path, easy_objects):
+    from graspsim.trials import TrialConfig, run_trials
+
+    runs = {}
+    for name in ("default", "jacquard"):
+        s = run_trials(detector="mask-pca", objects=easy_objects, n=2, seed=5,
+                       out=tmp_path / name, config=TrialConfig(n_candidates=0, profile=name))
+        lines = (tmp_path / name / "trials.jsonl").read_text().splitlines()
+        runs[name] = [json.loads(line) for line in lines]
+        assert s["n"] == 2
+    cfg = json.loads((tmp_path / "jacquard" / "config.json").read_text())
+    assert cfg["config"]["profile"] == "jacquard"
+    assert [r["object"] for r in runs["jacquard"]] == [r["object"] for r in runs["default"]]
+    with pytest.raises(ValueError, match="another configuration"):
+        run_trials(detector="mask-pca", objects=easy_objects, n=2, seed=5,
+                   out=tmp_path / "jacquard", config=TrialConfig(n_candidates=0))
