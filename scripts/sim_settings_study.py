@@ -19,11 +19,12 @@ Variants (one setting changed at a time; ``graspsim.profiles.SimProfile`` fields
   1.5x larger in pixels);
 - ``farther``: the camera 1.0-1.3 m above the table (labelled grasp openings about as wide in
   pixels as Jacquard's at the scale the detector reads them);
-- ``clean_depth``: no depth noise or dropout (``DepthNoise.off()``);
+- ``clean_depth``: no depth noise or dropout (``DepthNoise.off()``; the ``jacquard`` profile);
+- ``no_material_dropout``: the Kinect model without its dropout on dark, specular and
+  transparent objects (``DepthNoise(materials=False)``);
 - ``jacquard_look``: Jacquard's appearance: light grey table, even light without cast
-  shadows (the built-in ``jacquard`` profile);
-- ``grey_table``: the grey table alone (default lights);
-- ``combined``: ``closer`` and ``jacquard_look`` together (with ``--variants``).
+  shadows;
+- ``grey_table``: the grey table alone (default lights).
 
 Usage: python scripts/sim_settings_study.py measure [--scenes 20] [--out runs/sim_settings]
        python scripts/sim_settings_study.py study [--scenes 80] [--variants default closer ...]
@@ -40,19 +41,23 @@ from pathlib import Path
 
 import numpy as np
 
-from graspsim.camera import DepthNoise
+from graspsim.camera import DepthNoise, LightRanges
 from graspsim.profiles import PROFILES, SimProfile
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT = PROFILES["default"]
+# Jacquard's look: even light from high above, no cast shadows (with the grey table).
+SOFT_LIGHT = LightRanges(elevation=(60.0, 90.0), tint=(0.0, 0.05), ambient=(0.6, 0.75),
+                         diffuse=(0.2, 0.35), specular=(0.0, 0.1), shadow=0.0)
 VARIANTS: dict[str, SimProfile] = {
     "default": DEFAULT,
     "closer": replace(DEFAULT, name="closer", camera_height=(0.40, 0.50)),
     "farther": replace(DEFAULT, name="farther", camera_height=(1.0, 1.3)),
     "clean_depth": replace(DEFAULT, name="clean_depth", depth_noise=DepthNoise.off()),
-    "jacquard_look": replace(PROFILES["jacquard"], name="jacquard_look"),
+    "no_material_dropout": replace(DEFAULT, name="no_material_dropout",
+                                   depth_noise=DepthNoise(materials=False)),
+    "jacquard_look": replace(DEFAULT, name="jacquard_look", table="grey", lighting=SOFT_LIGHT),
     "grey_table": replace(DEFAULT, name="grey_table", table="grey"),
-    "combined": replace(PROFILES["jacquard"], name="combined", camera_height=(0.40, 0.50)),
 }
 
 

@@ -21,13 +21,16 @@ def test_get_profile_resolves_names_and_refuses_unknown_ones():
         get_profile("nope")
 
 
+SOFT = LightRanges(elevation=(60.0, 90.0), ambient=(0.6, 0.75), diffuse=(0.2, 0.35), shadow=0.0)
+LOOK = replace(SimProfile(), name="look", table="grey", lighting=SOFT)
+
+
 def test_jacquard_profile_changes_exactly_the_settings_it_names():
     assert profile_changes("default") == []
-    assert profile_changes("jacquard") == ["table", "lighting"]
+    assert profile_changes("jacquard") == ["depth_noise"]
     j = PROFILES["jacquard"]
-    assert j.table == "grey" and j.lighting.shadow == 0.0
-    assert j.camera_height == SimProfile().camera_height
-    assert j.intrinsics == SimProfile().intrinsics and j.depth_noise == DepthNoise()
+    assert j.depth_noise == DepthNoise.off() and not j.depth_noise.any
+    assert profile_changes(LOOK) == ["table", "lighting"]
 
 
 def test_profile_settings_are_checked_and_serialisable():
@@ -39,14 +42,15 @@ def test_profile_settings_are_checked_and_serialisable():
         LightRanges(ambient=(0.7, 0.4))
     with pytest.raises(ValueError, match="probability"):
         LightRanges(shadow=1.5)
-    d = json.loads(json.dumps(PROFILES["jacquard"].to_dict()))
+    d = json.loads(json.dumps(LOOK.to_dict()))
     assert d["table"] == "grey" and d["lighting"]["elevation"] == [60.0, 90.0]
     assert d["depth_noise"]["shadow"] is True and d["intrinsics"]["fx"] == 550.0
+    assert json.loads(json.dumps(PROFILES["jacquard"].to_dict()))["depth_noise"]["shadow"] is False
 
 
 def test_light_ranges_bound_the_draws_and_keep_the_stream():
     """Other ranges give lights inside them, from the same number of draws."""
-    soft = PROFILES["jacquard"].lighting
+    soft = SOFT
     for seed in range(20):
         a, b = np.random.default_rng(seed), np.random.default_rng(seed)
         la, lb = random_lights(a), random_lights(b, soft)
@@ -72,8 +76,9 @@ def test_table_colour_grey_from_the_same_draws():
 
 @pytest.mark.sim
 def test_profile_changes_the_look_not_the_scene_or_the_depth(easy_objects):
-    """Under "jacquard" the same scene is seen from the same pose with the same depth; only the
-    table colour and the light differ. A closer camera sees the object larger."""
+    """Under a grey table and soft light the same scene is seen from the same pose with the
+    same depth; only the table colour and the light differ. Under "jacquard" only the depth
+    does (it is the clean depth). A closer camera sees the object larger."""
     from graspsim.sim import Simulation
     from graspsim.trials import observe_scene
 
@@ -82,7 +87,7 @@ def test_profile_changes_the_look_not_the_scene_or_the_depth(easy_objects):
         s0, b0, f0, _ = observe_scene(sim, easy_objects, 3, 0)
         objects0 = [(o.spec.name, o.position, o.orientation) for o in s0.objects]
         area0 = np.isin(f0.segmentation, b0.objects).sum()
-        s1, _, f1, _ = observe_scene(sim, easy_objects, 3, 0, profile="jacquard")
+        s1, _, f1, _ = observe_scene(sim, easy_objects, 3, 0, profile=LOOK)
         assert [(o.spec.name, o.position, o.orientation) for o in s1.objects] == objects0
         np.testing.assert_array_equal(f1.T_world_cam, f0.T_world_cam)
         np.testing.assert_array_equal(f1.depth, f0.depth)
@@ -90,6 +95,12 @@ def test_profile_changes_the_look_not_the_scene_or_the_depth(easy_objects):
         assert s1.table_rgba[0] == s1.table_rgba[1] == s1.table_rgba[2]
         assert s0.table_rgba != s1.table_rgba and not f1.lights.shadow
         assert not np.array_equal(f1.rgb, f0.rgb)
+        s3, _, f3, _ = observe_scene(sim, easy_objects, 3, 0, profile="jacquard")
+        assert s3.table_rgba == s0.table_rgba
+        np.testing.assert_array_equal(f3.rgb, f0.rgb)
+        np.testing.assert_array_equal(f3.T_world_cam, f0.T_world_cam)
+        np.testing.assert_array_equal(f3.depth, np.where(f3.depth_clean > 0, f3.depth_clean, 0))
+        assert f3.depth_valid.sum() > f0.depth_valid.sum()
         close = replace(SimProfile(), name="close", camera_height=(0.4, 0.4),
                         depth_noise=DepthNoise.off())
         s2, b2, f2, _ = observe_scene(sim, easy_objects, 3, 0, profile=close)
@@ -106,9 +117,9 @@ def test_dataset_records_its_profile_and_refuses_another(tmp_path, easy_objects)
     from graspsim.datagen import MANIFEST, make_dataset
 
     make_dataset(n_scenes=1, objects=easy_objects, out=tmp_path, seed=2, n_candidates=2,
-                 profile="jacquard")
+                 profile=LOOK)
     m = json.loads((tmp_path / MANIFEST).read_text())
-    assert m["generator"]["profile"]["name"] == "jacquard"
+    assert m["generator"]["profile"]["name"] == "look"
     assert m["generator"]["profile"]["table"] == "grey"
     rgba = m["images"][0]["table"]["rgba"]
     assert rgba[0] == rgba[1] == rgba[2]
@@ -122,11 +133,18 @@ def test_env_takes_a_profile():
 
     with pytest.raises(ValueError, match="unknown simulation profile"):
         GraspEnv(profile="nope")
-    env = GraspEnv(objects="train", profile="jacquard")
+    env = GraspEnv(objects="train", profile=LOOK)
     try:
         obs, info = env.reset(seed=1)
         assert obs["rgb"].shape == (480, 640, 3)
         assert env._scene.table_rgba[0] == env._scene.table_rgba[1]
+    finally:
+        env.close()
+    env = GraspEnv(objects="train", profile="jacquard")
+    try:
+        obs, info = env.reset(seed=1)
+        f = env._frame
+        np.testing.assert_array_equal(obs["depth"], np.where(f.depth_clean > 0, f.depth_clean, 0))
     finally:
         env.close()
 
