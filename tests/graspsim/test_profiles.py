@@ -175,3 +175,12 @@ def test_trials_run_under_a_profile_on_the_same_scenes(tmp_path, easy_objects):
     with pytest.raises(ValueError, match="another configuration"):
         run_trials(detector="mask-pca", objects=easy_objects, n=2, seed=5,
                    out=tmp_path / "jacquard", config=TrialConfig(n_candidates=0))
+
+
+def test_cli_trials_refuses_an_unknown_profile(capsys):
+    from graspsim.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["trials", "--detector", "random", "--n", "1", "--out", "x", "--profile", "nope"])
+    assert e.value.code == 2
+    assert "invalid choice: 'nope'" in capsys.readouterr().err
