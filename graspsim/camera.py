@@ -51,6 +51,7 @@ __all__ = [
     "CameraIntrinsics",
     "DepthNoise",
     "Lights",
+    "LightRanges",
     "RGBDFrame",
     "Camera",
     "look_down_pose",
@@ -532,17 +533,72 @@ class Lights:
                     lightSpecularCoeff=self.specular)
 
 
-def random_lights(rng: np.random.Generator) -> Lights:
-    """Light from a random direction of the upper hemisphere (elevation 30-90 deg), slightly
-    tinted, with random ambient/diffuse/specular coefficients and cast shadows half the time."""
+@dataclass(frozen=True)
+class LightRanges:
+    """Ranges :func:`random_lights` draws a light from (uniformly within each).
+
+    The defaults are the simulator's usual lighting. Every field is a ``(low, high)`` range,
+    except ``shadow``, the probability of cast shadows. Changing a range never changes how many
+    values are drawn, so the draws after the lights (the depth noise) stay the same.
+
+    Attributes
+    ----------
+    elevation : (float, float)
+        Elevation of the light direction above the table plane, degrees.
+    tint : (float, float)
+        Per-channel reduction of the white light colour (0 = white).
+    distance : (float, float)
+        Light distance, metres (TinyRenderer's shading parameter).
+    ambient, diffuse, specular : (float, float)
+        TinyRenderer's lighting coefficients.
+    shadow : float
+        Probability that the light casts shadows.
+    """
+
+    elevation: tuple[float, float] = (30.0, 90.0)
+    tint: tuple[float, float] = (0.0, 0.15)
+    distance: tuple[float, float] = (1.5, 3.0)
+    ambient: tuple[float, float] = (0.45, 0.7)
+    diffuse: tuple[float, float] = (0.25, 0.5)
+    specular: tuple[float, float] = (0.0, 0.2)
+    shadow: float = 0.5
+
+    def __post_init__(self):
+        for name in ("elevation", "tint", "distance", "ambient", "diffuse", "specular"):
+            lo, hi = getattr(self, name)
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+                raise ValueError(f"LightRanges.{name} must be a finite (low, high) with "
+                                 f"low <= high, got {(lo, hi)}")
+        if not 0.0 <= self.shadow <= 1.0:
+            raise ValueError(f"LightRanges.shadow is a probability, got {self.shadow}")
+
+
+def random_lights(rng: np.random.Generator, ranges: LightRanges | None = None) -> Lights:
+    """Light from a random direction of the upper hemisphere, slightly tinted, with random
+    ambient/diffuse/specular coefficients and cast shadows at random.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Eleven values are drawn, whatever the ranges.
+    ranges : LightRanges or None
+        None: ``LightRanges()`` (elevation 30-90 deg, shadows half the time).
+
+    Returns
+    -------
+    Lights
+    """
+    r = LightRanges() if ranges is None else ranges
     az = rng.uniform(0, 2 * np.pi)
-    el = rng.uniform(np.deg2rad(30), np.deg2rad(90))
+    el = rng.uniform(np.deg2rad(r.elevation[0]), np.deg2rad(r.elevation[1]))
     d = (np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el))
-    tint = 1.0 - rng.uniform(0.0, 0.15, size=3)
+    tint = 1.0 - rng.uniform(r.tint[0], r.tint[1], size=3)
     return Lights(direction=tuple(float(x) for x in d), color=tuple(float(x) for x in tint),
-                  distance=float(rng.uniform(1.5, 3.0)), ambient=float(rng.uniform(0.45, 0.7)),
-                  diffuse=float(rng.uniform(0.25, 0.5)), specular=float(rng.uniform(0.0, 0.2)),
-                  shadow=bool(rng.random() < 0.5))
+                  distance=float(rng.uniform(*r.distance)),
+                  ambient=float(rng.uniform(*r.ambient)),
+                  diffuse=float(rng.uniform(*r.diffuse)),
+                  specular=float(rng.uniform(*r.specular)),
+                  shadow=bool(rng.random() < r.shadow))
 
 
 def random_table_rgba(rng: np.random.Generator) -> tuple[float, float, float, float]:
@@ -685,7 +741,8 @@ class Camera:
 
     def render(self, T_world_cam: np.ndarray, rng: np.random.Generator,
                noise: DepthNoise | None = None, lights: Lights | None = None,
-               materials: dict[int, str] | None = None) -> RGBDFrame:
+               materials: dict[int, str] | None = None,
+               lighting: LightRanges | None = None) -> RGBDFrame:
         """Render one frame.
 
         Parameters
@@ -699,13 +756,15 @@ class Camera:
         lights : Lights or None
             None: ``random_lights(rng)``.
         materials : dict body id -> material, for the material dropout.
+        lighting : LightRanges or None
+            The ranges the lights are drawn from (None: ``LightRanges()``).
 
         Returns
         -------
         RGBDFrame
         """
         noise = DepthNoise() if noise is None else noise
-        drawn = random_lights(rng)
+        drawn = random_lights(rng, lighting)
         lights = drawn if lights is None else lights
         rgb, clean, seg = self.render_clean(T_world_cam, lights)
         depth, valid = apply_depth_noise(clean, self.intrinsics, rng, noise, seg, materials)

@@ -144,9 +144,10 @@ def _camera_record(frame) -> dict:
 
 
 def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects: int = 1,
-                 sampler: str = "mixed"):
+                 sampler: str = "mixed", profile=None):
     """One labelled scene (``sampler``: the candidates' mode, see
-    :func:`graspsim.labelling.sample_candidates`).
+    :func:`graspsim.labelling.sample_candidates`; ``profile``: how the scene is seen, see
+    :mod:`graspsim.profiles`).
 
     Returns
     -------
@@ -162,7 +163,7 @@ def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects
     from .trials import _worker_sim, observe_scene
 
     sim = _worker_sim()
-    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects)
+    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects, profile)
     cands = sample_candidates(frame.segmentation, bodies.objects, st["label"], n_candidates,
                               depth=frame.depth_clean, mode=sampler,
                               intrinsics=frame.intrinsics)
@@ -192,8 +193,8 @@ def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects
     return sample, reasons, entry
 
 
-def _scene_task(specs, seed, index, n_candidates, n_objects, sampler):
-    return scene_sample(specs, seed, index, n_candidates, n_objects, sampler)
+def _scene_task(specs, seed, index, n_candidates, n_objects, sampler, profile):
+    return scene_sample(specs, seed, index, n_candidates, n_objects, sampler, profile)
 
 
 def _sha256(path) -> str:
@@ -202,7 +203,8 @@ def _sha256(path) -> str:
 
 def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: int = 0,
                  n_candidates: int = 48, n_objects: int = 1, n_jobs: int = 1,
-                 progress: bool = False, executor=None, sampler: str = "mixed") -> dict:
+                 progress: bool = False, executor=None, sampler: str = "mixed",
+                 profile=None) -> dict:
     """Write a synthetic, physics-labelled Cornell dataset; resumes an interrupted run.
 
     Each scene is written as soon as it is labelled and recorded in ``scenes.jsonl``; a rerun
@@ -233,6 +235,12 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         ``"mixed"`` (centroid, chord and random candidates) or ``"dense"`` (a Jacquard-like
         lattice over the objects, every 15 degrees; ``n_candidates`` is its budget: 192-256
         cover 99.5 % of independently found successful grasps, see the README).
+    profile : str, graspsim.profiles.SimProfile or None
+        How scenes are seen (camera height and intrinsics, table colour, lighting, depth
+        noise; :mod:`graspsim.profiles`); None or ``"default"``: the simulator's default. The
+        objects and their poses do not depend on it. Any other than the default is recorded
+        with its settings in ``dataset_config.json`` and ``scenes.json``
+        (``generator.profile``).
 
     Returns
     -------
@@ -248,7 +256,10 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
 
     if n_scenes < 1:
         raise ValueError(f"n_scenes must be >= 1, got {n_scenes}")
+    from .profiles import get_profile
+
     check_sampler(sampler)
+    prof = get_profile(profile)
     specs = resolve_objects(objects)
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
@@ -257,6 +268,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
             "seed": seed, "n_candidates": n_candidates, "n_objects": n_objects}
     if sampler != "mixed":  # datasets of the default sampler keep their recorded configuration
         meta["sampler"] = sampler
+    if prof != get_profile(None):  # likewise datasets of the default profile
+        meta["profile"] = prof.to_dict()
     meta_path = root / "dataset_config.json"
     if meta_path.exists() and read_json(meta_path, "dataset configuration") != meta:
         raise ValueError(f"{root} holds a dataset of another configuration ({meta_path}); "
@@ -270,7 +283,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
                  n_scenes)
     t0 = time.perf_counter()
     ex = _executor(executor, n_jobs, progress)
-    tasks = [(specs, seed, i, n_candidates, n_objects, sampler) for i in todo]
+    tasks = [(specs, seed, i, n_candidates, n_objects, sampler, prof) for i in todo]
     with log_path.open("a") as fh:
         for i, (sample, rs, entry) in zip(
                 todo, ex.imap(_scene_task, tasks, desc="scenes", star=True), strict=True):
@@ -297,6 +310,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         "format": MANIFEST_FORMAT,
         "generator": {**{k: meta[k] for k in ("seed", "objects", "n_candidates", "n_objects")},
                       "sampler": sampler,
+                      **({"profile": meta["profile"]} if "profile" in meta else {}),
                       "scene_streams": "numpy SeedSequence(seed, spawn_key=(index,)), "
                                        "graspsim.trials.trial_streams"},
         "execution": asdict(ExecutionParams()),

@@ -34,7 +34,7 @@ from dataclasses import asdict
 import numpy as np
 
 from .execution import ExecutionParams
-from .scene import TABLE_HALF_SIZE, PlacedObject, Scene, build_scene, capture, link_pose, settle
+from .scene import TABLE_HALF_SIZE, PlacedObject, Scene, build_scene, link_pose, settle
 from .trials import (
     NO_PROPOSAL,
     TrialConfig,
@@ -47,6 +47,7 @@ from .trials import (
     _worker_sim,
     observe_scene,
     planning_stats,
+    profile_capture,
     resolve_objects,
     wilson_interval,
 )
@@ -162,7 +163,8 @@ def run_round(sim, specs, detector, seed: int, index: int,
     """
     t0 = time.perf_counter()
     name = _detector_name(detector) if name is None else name
-    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects)
+    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects,
+                                             config.profile)
     placed = [o.spec.name for o in scene.objects]
     record = {"index": index, "seed": seed, "objects": placed, "n_objects": len(placed),
               "redraws": list(scene.redraws)}
@@ -179,7 +181,7 @@ def run_round(sim, specs, detector, seed: int, index: int,
         if a > 0:
             st = _attempt_streams(seed, index, a)
             bodies = build_scene(sim, scene)
-            frame = capture(sim, scene, bodies, st["camera"])
+            frame = profile_capture(sim, scene, bodies, st["camera"], config.profile)
         positives, n_labelled, (rects, scores, error, planning) = _label_and_propose(
             sim, scene, frame, bodies, st, detector, config, params, name,
             f"round {index} (seed {seed}), attempt {a}")

@@ -60,13 +60,18 @@ class GraspEnv(gym.Env):
     n_candidates : int
         Candidates executed to label a scene when ``reset(options={"label": True})``.
     noise : graspsim.camera.DepthNoise or None
-        None: the camera's default Kinect-like noise.
+        None: the profile's depth noise (the default profile's: Kinect-like).
+    profile : str, graspsim.profiles.SimProfile or None
+        How scenes are seen: camera height and intrinsics, table colour, lighting ranges and
+        depth noise (:mod:`graspsim.profiles`, e.g. ``"jacquard"``); None: the default. The
+        observation space follows its image size.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
 
     def __init__(self, render_mode=None, objects="test", n_objects=None, declutter=False,
-                 n_candidates=32, noise=None):
+                 n_candidates=32, noise=None, profile=None):
+        from .profiles import get_profile
         from .trials import resolve_objects
 
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -77,6 +82,9 @@ class GraspEnv(gym.Env):
         self.n_objects = (5 if declutter else 1) if n_objects is None else int(n_objects)
         self.n_candidates = int(n_candidates)
         self.noise = noise
+        self.profile = profile
+        self._profile = get_profile(profile)
+        H, W = self._profile.intrinsics.height, self._profile.intrinsics.width
         self.observation_space = spaces.Dict({
             "rgb": spaces.Box(0, 255, (H, W, 3), np.uint8),
             "depth": spaces.Box(0.0, 10.0, (H, W), np.float32),
@@ -95,7 +103,11 @@ class GraspEnv(gym.Env):
     # --- helpers --------------------------------------------------------------------------
     def _observe(self):
         bodies = build_scene(self.sim, self._scene)
-        self._frame = capture(self.sim, self._scene, bodies, self.np_random, noise=self.noise)
+        p = self._profile
+        self._frame = capture(self.sim, self._scene, bodies, self.np_random,
+                              noise=p.depth_noise if self.noise is None else self.noise,
+                              intrinsics=p.intrinsics, height=p.camera_height,
+                              lighting=p.lighting)
         self._bodies = bodies
         f = self._frame
         return {
@@ -127,7 +139,8 @@ class GraspEnv(gym.Env):
         super().reset(seed=seed)
         options = options or {}
         self._scene = make_scene(self.sim, self.specs, self.np_random, n_objects=self.n_objects,
-                                 spread=0.05 if self.n_objects == 1 else 0.1)
+                                 spread=0.05 if self.n_objects == 1 else 0.1,
+                                 table=self._profile.table)
         self._label_scenes = bool(options.get("label", False))
         self._positives = None
         obs = self._observe()

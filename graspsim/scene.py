@@ -30,6 +30,8 @@ __all__ = [
     "random_quaternion",
     "drop_orientation",
     "TABLE_HALF_SIZE",
+    "TABLE_COLOURS",
+    "table_colour",
     "capture",
     "settle",
     "link_pose",
@@ -113,6 +115,30 @@ def drop_orientation(rng: np.random.Generator, upright: float = 0.5):
     return random_quaternion(rng)
 
 
+TABLE_COLOURS = ("random", "grey")
+
+
+def table_colour(draws, table: str = "random") -> tuple[float, float, float, float]:
+    """RGBA of the table top from three uniform draws in 0.25-0.75 (see :func:`make_scene`).
+
+    Parameters
+    ----------
+    draws : (3,) array of float
+    table : {"random", "grey"}
+
+    Returns
+    -------
+    tuple of 4 floats
+    """
+    if table not in TABLE_COLOURS:
+        raise ValueError(f"unknown table colour {table!r}; use one of {TABLE_COLOURS}")
+    d = [float(v) for v in draws]
+    if table == "grey":
+        level = 0.6 + 0.2 * (sum(d) / 3.0 - 0.25) / 0.5
+        return (level, level, level, 1.0)
+    return (d[0], d[1], d[2], 1.0)
+
+
 def _add_table(sim, table_z: float, rgba) -> int:
     c = sim.client
     half = [TABLE_HALF_SIZE, TABLE_HALF_SIZE, TABLE_THICKNESS / 2]
@@ -185,6 +211,7 @@ def make_scene(
     settle_time: float = 3.0,
     max_redraws: int = 20,
     upright: float = 0.5,
+    table: str = "random",
 ) -> Scene:
     """Drop objects one by one at random poses and let them settle.
 
@@ -207,6 +234,10 @@ def make_scene(
         Probability of dropping an object in its modelled (upright) orientation with a random
         yaw, as people place objects for a Cornell-like picture; otherwise the orientation is
         uniformly random.
+    table : {"random", "grey"}
+        The table top's colour: ``"random"``, each channel uniform in 0.25-0.75 (muted
+        colours); ``"grey"``, a light grey of level 0.6-0.8 (like Jacquard's renders) made from
+        the same three draws (their mean, rescaled), so the objects and poses do not change.
 
     Returns
     -------
@@ -217,7 +248,7 @@ def make_scene(
     if n_objects < 1:
         raise ValueError(f"n_objects must be >= 1, got {n_objects}")
     hue = rng.uniform(0.25, 0.75, size=3)
-    scene = Scene([], table_z, (float(hue[0]), float(hue[1]), float(hue[2]), 1.0))
+    scene = Scene([], table_z, table_colour(hue, table))
     redraws = 0
     while len(scene.objects) < n_objects:
         spec = specs[int(rng.integers(len(specs)))]
@@ -248,7 +279,7 @@ def make_scene(
 
 
 def capture(sim, scene: Scene, bodies: SceneBodies, rng: np.random.Generator, noise=None,
-            intrinsics=None, height=(0.6, 0.8), table_texture: bool = False):
+            intrinsics=None, height=(0.6, 0.8), table_texture: bool = False, lighting=None):
     """Render the built scene from a random look-down camera pose.
 
     Parameters
@@ -269,6 +300,8 @@ def capture(sim, scene: Scene, bodies: SceneBodies, rng: np.random.Generator, no
         ``resetSimulation`` (texture ids restart, its cache does not), so textures would make a
         frame depend on what the same simulator rendered before. The table colour (drawn by
         :func:`make_scene`) and the lights still vary.
+    lighting : graspsim.camera.LightRanges or None
+        The ranges the lights are drawn from (None: the camera's default).
 
     Returns
     -------
@@ -280,7 +313,7 @@ def capture(sim, scene: Scene, bodies: SceneBodies, rng: np.random.Generator, no
     T = camera.look_down_pose(rng, height=height, table_z=scene.table_z)
     if table_texture:
         camera.random_table_texture(sim.client, rng, body=bodies.table)
-    kwargs = {"materials": bodies.materials(scene)}
+    kwargs = {"materials": bodies.materials(scene), "lighting": lighting}
     if noise is not None:
         kwargs["noise"] = noise
     return camera.Camera(sim.client, intr).render(T, rng, **kwargs)

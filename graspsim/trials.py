@@ -92,12 +92,17 @@ class TrialConfig:
     sampler : {"mixed", "dense"}
         How labelling candidates are drawn (:func:`graspsim.labelling.sample_candidates`;
         ``"dense"`` takes ``n_candidates`` as its budget).
+    profile : str
+        How scenes are seen: a name in :data:`graspsim.profiles.PROFILES` (camera height and
+        intrinsics, table colour, lighting, depth noise); the objects and poses of trial ``i``
+        do not depend on it.
     """
 
     n_candidates: int = 32
     n_objects: int = 1
     label_with_clean_depth: bool = False
     sampler: str = "mixed"
+    profile: str = "default"
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -137,8 +142,13 @@ def trial_streams(seed: int, index: int) -> dict:
     }
 
 
-def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1):
+def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile=None):
     """Build trial ``index``'s seeded scene in ``sim`` and take its observation.
+
+    ``profile`` (a :class:`graspsim.profiles.SimProfile` or a name in
+    :data:`graspsim.profiles.PROFILES`; None for the default) sets the camera height and
+    intrinsics, table colour, lighting ranges and depth noise; the objects and their poses are
+    the same under every profile.
 
     Returns
     -------
@@ -149,11 +159,25 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1):
         The trial's generators (:func:`trial_streams`); ``"label"`` and ``"detector_seed"``
         are still unused.
     """
+    from .profiles import get_profile
+
+    prof = get_profile(profile)
     st = trial_streams(seed, index)
-    scene = make_scene(sim, specs, st["scene"], n_objects=n_objects)
+    scene = make_scene(sim, specs, st["scene"], n_objects=n_objects, table=prof.table)
     bodies = build_scene(sim, scene)
-    frame = capture(sim, scene, bodies, st["camera"])
+    frame = profile_capture(sim, scene, bodies, st["camera"], prof)
     return scene, bodies, frame, st
+
+
+def profile_capture(sim, scene, bodies, rng, profile=None):
+    """:func:`graspsim.scene.capture` with a profile's camera height, intrinsics, lighting
+    ranges and depth noise (``profile``: a :class:`graspsim.profiles.SimProfile`, a name, or
+    None for the default)."""
+    from .profiles import get_profile
+
+    prof = get_profile(profile)
+    return capture(sim, scene, bodies, rng, noise=prof.depth_noise, intrinsics=prof.intrinsics,
+                   height=prof.camera_height, lighting=prof.lighting)
 
 
 _WORKER = {}
@@ -305,7 +329,8 @@ def run_trial(sim, specs, detector, seed: int, index: int,
         When the detector's return value breaks the protocol (the message names the trial).
     """
     t0 = time.perf_counter()
-    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects)
+    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects,
+                                             config.profile)
     positives, n_labelled, (rects, scores, error, planning) = _label_and_propose(
         sim, scene, frame, bodies, st, detector, config, params, name,
         f"trial {index} (seed {seed})")

@@ -17,7 +17,7 @@ All runs go through :func:`graspsim.benchmarks.detection_benchmark` and resume i
 
 Usage: python scripts/crossdata_detection.py --sim runs/sim_train [--out runs/crossdata]
        [--data ../shared/data/jacquard_samples --format jacquard] [--rows sim_to_real real_cv
-       sim_plus_real_cv] [--jobs 1]
+       sim_plus_real_cv] [--grid-negatives 1] [--coarse-to-fine] [--jobs 1]
 """
 
 from __future__ import annotations
@@ -49,13 +49,19 @@ def main(argv=None):
     ap.add_argument("--encoder", default="Natural")
     ap.add_argument("--rows", nargs="+", default=list(ROWS), choices=list(ROWS))
     ap.add_argument("--out", type=Path, default=REPO / "runs" / "crossdata")
+    ap.add_argument("--grid-negatives", type=float, default=1.0,
+                    help="training negatives from the search grid per labelled rectangle "
+                         "(0: the paper's training)")
+    ap.add_argument("--coarse-to-fine", action="store_true",
+                    help="the dense detector's coarse-to-fine search (about 4x faster)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     ex = Executor("sequential" if args.jobs == 1 else "loky", n_jobs=args.jobs, progress=False)
     common = dict(scale=args.scale, learner=args.learner, encoder=args.encoder, seed=args.seed,
-                  executor=ex)
+                  coarse_to_fine=args.coarse_to_fine, executor=ex)
+    training = dict(grid_negatives=args.grid_negatives)
     runs, seconds = {}, {}
     for row in args.rows:
         t = time.perf_counter()
@@ -64,7 +70,7 @@ def main(argv=None):
             if not mpath.with_name("sim_model.json").is_file():
                 sim = [s for s in load_samples(args.sim, "cornell", args.sim_scale) if s.positives]
                 model = train_detector(sim, learner=args.learner, encoder=args.encoder,
-                                       random_state=args.seed)
+                                       random_state=args.seed, **training)
                 model.save(mpath)
             info = DLSRDetector.load(mpath).config
             print(json.dumps({"sim_model": str(mpath), "train_seconds": info["train_seconds"],
@@ -73,11 +79,12 @@ def main(argv=None):
             runs[row] = detection_benchmark(args.data, args.format, args.out / row,
                                             model=mpath, **common_model)
         elif row == "real_cv":
-            runs[row] = detection_benchmark(args.data, args.format, args.out / row, **common)
+            runs[row] = detection_benchmark(args.data, args.format, args.out / row, **common,
+                                            **training)
         else:
             runs[row] = detection_benchmark(args.data, args.format, args.out / row,
                                             extra_train=args.sim, extra_format="cornell",
-                                            extra_scale=args.sim_scale, **common)
+                                            extra_scale=args.sim_scale, **common, **training)
         seconds[row] = round(time.perf_counter() - t, 1)
         print(json.dumps({"row": row, "accuracy": runs[row]["accuracy"],
                           "baselines": runs[row]["baselines"], "seconds": seconds[row]}),

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from graspsim.profiles import PROFILES
+
 from . import add_executor_args, executor_from_args
 
 
@@ -20,6 +22,9 @@ def register(subparsers) -> None:
                    help="labelling candidates: mixed (centroid, chord, random) or dense "
                         "(Jacquard-like lattice, every 15 deg; --candidates is its budget)")
     p.add_argument("--objects-per-scene", type=int, default=1)
+    p.add_argument("--profile", default="default", choices=sorted(PROFILES),
+                   help="how scenes are seen: camera, table, lighting, depth noise "
+                        "(docs/sim_settings.md; default: %(default)s)")
     add_executor_args(p)
     p.set_defaults(func=_run)
 
@@ -29,7 +34,7 @@ def _run(args: argparse.Namespace) -> int:
 
     s = make_dataset(n_scenes=args.scenes, objects=args.objects, out=args.out, seed=args.seed,
                      n_candidates=args.candidates, n_objects=args.objects_per_scene,
-                     sampler=args.sampler,
+                     sampler=args.sampler, profile=args.profile,
                      executor=executor_from_args(args))
     print(f"wrote {s['images']} images ({s['positives']} positives, {s['negatives']} negatives) "
           f"to {args.out}; manifest {s['manifest']} (sha256 {s['fingerprint'][:12]}...)")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from graspsim.profiles import PROFILES
+
 from . import add_executor_args, executor_from_args
 
 
@@ -36,6 +38,9 @@ def register(subparsers) -> None:
     p.add_argument("--sampler", default="mixed", choices=["mixed", "dense"],
                    help="labelling candidates: mixed (centroid, chord, random) or dense "
                         "(Jacquard-like lattice, every 15 deg; --candidates is its budget)")
+    p.add_argument("--profile", default="default", choices=sorted(PROFILES),
+                   help="how scenes are seen: camera, table, lighting, depth noise "
+                        "(docs/sim_settings.md; default: %(default)s)")
     p.add_argument("--objects-per-scene", type=int, default=None,
                    help="1: Cornell-like (default); >1 clutter (default 5 with --declutter)")
     p.add_argument("--declutter", action="store_true",
@@ -55,7 +60,8 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--objects-per-scene must be >= 1, got {k}")
     if args.n < 0:
         raise ValueError(f"--n must be >= 0, got {args.n}")
-    config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler)
+    config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler,
+                         profile=args.profile)
     executor = executor_from_args(args)
     detector, name = args.detector, None
     if args.gripper_aware:
