@@ -64,13 +64,15 @@ def test_random_is_seeded_by_obs_and_oracle_needs_labels():
 def _look_down_obs(height=0.75):
     """A box 6 cm tall (40 x 120 px at the top) on a table 0.75 m under a camera looking
     straight down, with its pinhole camera."""
-    from tests.graspsim.test_grasp import K, look_down
-
+    T_world_cam = np.eye(4)
+    T_world_cam[:3, :3] = np.diag([1.0, -1.0, -1.0])  # image x = world x, optical axis down
+    T_world_cam[2, 3] = height
     depth = np.full((480, 640), height, np.float32)
     depth[220:260, 260:380] = height - 0.06  # long axis along the image x
     return {"rgb": np.zeros((480, 640, 3), np.uint8), "depth": depth,
-            "depth_valid": np.ones((480, 640), np.uint8), "K": K,
-            "T_world_cam": look_down(height), "seed": 0}
+            "depth_valid": np.ones((480, 640), np.uint8),
+            "K": np.array([[550.0, 0, 319.5], [0, 550.0, 239.5], [0, 0, 1]]),
+            "T_world_cam": T_world_cam, "seed": 0}
 
 
 class _Fixed:
