@@ -209,3 +209,15 @@ def test_report_says_why_a_pair_was_not_compared(tmp_path):
     md = write_report(tmp_path, config, stages).read_text()
     assert "dlsr against mask-pca: not compared" in md and "seed 7 vs 8" in md
     assert (tmp_path / "pictures" / "success_rates.png").exists()
+
+
+@pytest.mark.parametrize("name", ["full.toml", "trials500.toml"])
+def test_committed_configs_load(name):
+    from pathlib import Path
+
+    path = Path(pipeline.__file__).resolve().parents[1] / "configs" / name
+    if not path.exists():
+        pytest.skip(f"{path} is not in this installation (configs/ lives in the repository)")
+    cfg = pipeline.load_config(path)
+    assert cfg.trials == 500 and cfg.name == path.stem
+    assert cfg.gripper_aware and cfg.grid_negatives == 0.0  # the defaults they build on
