@@ -159,8 +159,11 @@ class RunConfig:
                              f"got {self.baselines!r}")
         seen = set()
         for name in self.baselines:
-            if name in ("dlsr", "dlsr-paper") or name in seen:
-                raise ValueError(f"baselines: {name!r} is listed twice (DLSR always runs)")
+            if name in ("dlsr", "dlsr-paper"):
+                raise ValueError(f"baselines: {name!r} is DLSR's own trial name (DLSR always "
+                                 f"runs, and dlsr-paper with the gripper-aware search)")
+            if name in seen:
+                raise ValueError(f"baselines: {name!r} is listed twice")
             seen.add(name)
             try:
                 check_detector(name)

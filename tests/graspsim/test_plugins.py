@@ -321,11 +321,15 @@ def test_pipeline_baselines_take_plugins(plugin_dir):
         pipeline.load_config(baselines=["no_such_module_q:Det"])
     with pytest.raises(ValueError, match="listed twice"):
         pipeline.load_config(baselines=["random", "random"])
-    # The trial stage, with DLSR's trials already finished.
+    with pytest.raises(ValueError, match="DLSR's own trial name"):
+        pipeline.load_config(baselines=["dlsr-paper"])  # it runs with the gripper-aware search
+    # The trial stage, with DLSR's trials (both searches) already finished.
     root = folder / "run"
     root.mkdir()
     stages = pipeline._Stages(root)
+    assert pipeline.trial_names(config) == ["dlsr", "dlsr-paper", f"{name}:Det"]
     stages.finish("trials/dlsr", {"n": 0})
+    stages.finish("trials/dlsr-paper", {"n": 0})
     pipeline.trial_stage(root, config, stages, root / "model" / "dlsr", seed=3,
                          executor=Executor("sequential", progress=False), progress=False)
     s = stages.get(f"trials/{name}:Det")
