@@ -79,6 +79,10 @@ Departures and choices (named options)
   makes small models pick a grasp across a real remote control's short side (``graspsim
   detect`` on Cornell images, tested), where the paper's search picked 10 to 20 px squares on
   its edge.
+* ``SearchGrid.max_width`` (None by default): only candidates whose opening, measured in metres
+  at the depth under their centre with the observation's camera matrix ``K``
+  (:func:`opening_widths`), a gripper reaches. ``graspsim`` sets it with ``clear_jaws`` in its
+  gripper-aware search (:func:`graspsim.detectors.gripper_aware`); models never save it.
 
 Modules
 -------
