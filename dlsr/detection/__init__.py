@@ -82,7 +82,8 @@ Departures and choices (named options)
 * ``SearchGrid.max_width`` (None by default): only candidates whose opening, measured in metres
   at the depth under their centre with the observation's camera matrix ``K``
   (:func:`opening_widths`), a gripper reaches. ``graspsim`` sets it with ``clear_jaws`` in its
-  gripper-aware search (:func:`graspsim.detectors.gripper_aware`); models never save it.
+  gripper-aware search (:func:`graspsim.detectors.gripper_aware`) at detection time; the models
+  it trains do not carry it.
 
 Modules
 -------
