@@ -303,8 +303,7 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
     if grasp.T_world_grasp is None:
         return True
     K = _intrinsic_matrix(intrinsics)
-    depth = np.asarray(depth, dtype=float)
-    valid = np.asarray(valid, dtype=bool) & np.isfinite(depth) & (depth > 0)
+    depth = np.asarray(depth)
     H, W = depth.shape
     T_cam_grasp = np.linalg.inv(np.asarray(T_world_cam, dtype=float)) @ grasp.T_world_grasp
     R, o = T_cam_grasp[:3, :3], T_cam_grasp[:3, 3]
@@ -320,5 +319,6 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
     tip = o[2] + TIP_OFFSET * R[2, 2]
     if table_depth is not None:
         tip = min(tip, float(np.min(np.asarray(table_depth)[v, u])) - tip_clearance)
-    ok = valid[v, u]
-    return bool(np.any(depth[v, u][ok] < tip - tolerance))
+    d = depth[v, u].astype(float)  # only the footprint's pixels: called per candidate
+    ok = np.asarray(valid)[v, u].astype(bool) & np.isfinite(d) & (d > 0)
+    return bool(np.any(d[ok] < tip - tolerance))
