@@ -130,6 +130,7 @@ from .grid import (  # noqa: F401
     opening_widths,
     table_plane_mask,
     table_surface,
+    within_reach,
 )
 from .model import (  # noqa: F401
     FORMAT_VERSION,
@@ -172,6 +173,7 @@ __all__ = [
     "opening_widths",
     "table_plane_mask",
     "table_surface",
+    "within_reach",
     "background_mask",
     "enumerate_candidates",
     "jaws_clear",

@@ -27,7 +27,7 @@ from .grid import (
     _axes,
     _box_sums,
     jaws_clear,
-    opening_widths,
+    within_reach,
 )
 from .model import GRID, PATCH, PATCHES_PER_RECTANGLE, SIZE, SPLIT
 
@@ -497,9 +497,7 @@ class DenseDetector(_Base):
         fine = fine[inside]
         if g.clear_jaws and region is not None:
             fine = fine[jaws_clear(region, fine)]
-        if g.max_width is not None and len(fine):
-            fine = fine[opening_widths(obs, fine, region) <= g.max_width]
-        return fine
+        return within_reach(obs, fine, region, g)
 
     def _padding_code_scores(self, V):
         """``V[:, q] . code(all-masked patch)`` per quadrant (the exact path's padding)."""

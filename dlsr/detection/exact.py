@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..rectangles import GraspRectangle, array_to_rects
-from .grid import PAPER_GRID, SearchGrid, enumerate_candidates, object_region, opening_widths
+from .grid import PAPER_GRID, SearchGrid, enumerate_candidates, object_region, within_reach
 from .model import PATCHES_PER_RECTANGLE, DLSRDetector
 
 log = logging.getLogger(__name__)
@@ -95,8 +95,7 @@ class _Base:
             return np.zeros((0, 5)), f"empty object region (method {how})", region
         grid = grid or self.grid
         cand = enumerate_candidates(region, grid)
-        if grid.max_width is not None and len(cand):
-            cand = cand[opening_widths(obs, cand, region) <= grid.max_width]
+        cand = within_reach(obs, cand, region, grid)
         if len(cand) == 0:
             what = " with both jaws clear of it" if grid.clear_jaws else ""
             if grid.max_width is not None:

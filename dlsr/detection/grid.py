@@ -530,6 +530,14 @@ def opening_widths(obs: dict, rects, region=None) -> np.ndarray:
     return rects[:, 3] * z * scale
 
 
+def within_reach(obs: dict, rects, region, grid: SearchGrid) -> np.ndarray:
+    """``rects`` whose opening is at most ``grid.max_width`` metres (:func:`opening_widths`);
+    all of them when ``grid.max_width`` is None."""
+    if grid.max_width is None or not len(rects):
+        return rects
+    return rects[opening_widths(obs, rects, region) <= grid.max_width]
+
+
 def jaws_clear(region, rects, max_on: float = 0.0, n_samples: int = 17,
                clearance: int = 1) -> np.ndarray:
     """Whether a parallel-jaw gripper can close on the object along each rectangle.
