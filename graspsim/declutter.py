@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import asdict
 
 import numpy as np
 
@@ -39,16 +38,15 @@ from .trials import (
     NO_PROPOSAL,
     TrialConfig,
     _campaign,
+    _campaign_setup,
     _detector_name,
     _execute,
     _label_and_propose,
     _planning_line,
-    _resolve,
     _worker_sim,
     observe_scene,
     planning_stats,
     profile_capture,
-    resolve_objects,
     wilson_interval,
 )
 
@@ -228,15 +226,10 @@ def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, 
     dict
         The summary (see :func:`summarize_rounds`), with ``records`` sorted by index.
     """
-    det, det_name = _resolve(detector, detector_name)
-    specs = resolve_objects(objects)
-    if n < 0:
-        raise ValueError(f"n must be >= 0, got {n}")
+    det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config)
     if config.n_objects < 1:
         raise ValueError(f"objects per scene must be >= 1, got {config.n_objects}")
-    meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
-            else [s.name for s in specs], "seed": seed, "config": asdict(config),
-            "mode": "declutter"}
+    meta["mode"] = "declutter"
     return _campaign(_round_task, "rounds", meta, out, n, [specs, det, seed, config, params],
                      executor, n_jobs, progress,
                      lambda records: summarize_rounds(records, random_state=seed),

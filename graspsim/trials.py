@@ -431,6 +431,18 @@ def _run_missing(fn, tasks, done: dict, jsonl, executor, desc: str) -> int:
     return new
 
 
+def _campaign_setup(detector, detector_name, objects, n: int, seed: int, config):
+    """The detector, the object specs and the arguments a campaign folder records
+    (``config.json``) for :func:`run_trials` and :func:`graspsim.declutter.run_rounds`."""
+    det, det_name = _resolve(detector, detector_name)
+    specs = resolve_objects(objects)
+    if n < 0:
+        raise ValueError(f"n must be >= 0, got {n}")
+    meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
+            else [s.name for s in specs], "seed": seed, "config": asdict(config)}
+    return det, specs, meta
+
+
 def _resolve(detector, detector_name):
     name = detector_name or (str(detector) if isinstance(detector, str | Path)
                              else _detector_name(detector))
@@ -478,12 +490,7 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     dict
         The summary (see :func:`summarize`), with ``records`` sorted by index.
     """
-    det, det_name = _resolve(detector, detector_name)
-    specs = resolve_objects(objects)
-    if n < 0:
-        raise ValueError(f"n must be >= 0, got {n}")
-    meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
-            else [s.name for s in specs], "seed": seed, "config": asdict(config)}
+    det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config)
     return _campaign(_trial_task, "trials", meta, out, n, [specs, det, seed, config, params],
                      executor, n_jobs, progress, summarize, summary_markdown)
 
