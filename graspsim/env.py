@@ -39,8 +39,9 @@ from dlsr.rectangles import GraspRectangle
 from .execution import execute_grasp, run_grasp
 from .grasp import rectangle_to_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
-from .scene import build_scene, capture, make_scene
+from .scene import build_scene, make_scene
 from .sim import Simulation
+from .trials import profile_capture
 
 __all__ = ["GraspEnv"]
 
@@ -103,11 +104,8 @@ class GraspEnv(gym.Env):
     # --- helpers --------------------------------------------------------------------------
     def _observe(self):
         bodies = build_scene(self.sim, self._scene)
-        p = self._profile
-        self._frame = capture(self.sim, self._scene, bodies, self.np_random,
-                              noise=p.depth_noise if self.noise is None else self.noise,
-                              intrinsics=p.intrinsics, height=p.camera_height,
-                              lighting=p.lighting)
+        self._frame = profile_capture(self.sim, self._scene, bodies, self.np_random,
+                                      self._profile, noise=self.noise)
         self._bodies = bodies
         f = self._frame
         return {

@@ -169,15 +169,16 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile
     return scene, bodies, frame, st
 
 
-def profile_capture(sim, scene, bodies, rng, profile=None):
+def profile_capture(sim, scene, bodies, rng, profile=None, noise=None):
     """:func:`graspsim.scene.capture` with a profile's camera height, intrinsics, lighting
     ranges and depth noise (``profile``: a :class:`graspsim.profiles.SimProfile`, a name, or
-    None for the default)."""
+    None for the default; ``noise``, when given, replaces the profile's depth noise)."""
     from .profiles import get_profile
 
     prof = get_profile(profile)
-    return capture(sim, scene, bodies, rng, noise=prof.depth_noise, intrinsics=prof.intrinsics,
-                   height=prof.camera_height, lighting=prof.lighting)
+    return capture(sim, scene, bodies, rng, noise=prof.depth_noise if noise is None else noise,
+                   intrinsics=prof.intrinsics, height=prof.camera_height,
+                   lighting=prof.lighting)
 
 
 _WORKER = {}
