@@ -304,3 +304,53 @@ def test_selftaught_benchmark_pairs_standard_and_selftaught(tmp_path, monkeypatc
     with pytest.raises(ValueError, match="different images"):
         gb.paired_detection_test({"per_image": [{"image_id": "a", "success": True}]},
                                  {"per_image": [{"image_id": "b", "success": True}]})
+
+
+def test_detection_benchmark_interrupted_keeps_images_and_fold_models(tmp_path, box_samples,
+                                                                      monkeypatch):
+    """An SC run (the Table 3 NKM-SC path) stopped mid-fold keeps what it finished: the images
+    already detected (results.jsonl) and the trained fold model; the rerun trains only the
+    missing folds, detects only the missing images and ends as an uninterrupted run."""
+    import dlsr.detection
+    import graspsim.benchmarks as gb
+
+    root = write_cornell(box_samples(4), tmp_path / "cornell")
+    opts = dict(scale=0.5, split="image", n_folds=2, learner="NKM", encoder="SC",
+                n_atoms=8, n_patches=1500, rescore=0, coarse_to_fine=True, n_overlays=0,
+                progress=False)
+    trained, detected = [], []
+    real_train, real_detect = dlsr.detection.train_detector, gb._detect_one
+
+    class Stop(Exception):
+        pass
+
+    def spy_train(samples, **kw):
+        trained.append(kw["random_state"])
+        return real_train(samples, **kw)
+
+    def stop_after_first(det, s, *a):
+        if detected:
+            raise Stop
+        detected.append(s.image_id)
+        return real_detect(det, s, *a)
+
+    monkeypatch.setattr(dlsr.detection, "train_detector", spy_train)
+    monkeypatch.setattr(gb, "_detect_one", stop_after_first)
+    out = tmp_path / "o"
+    with pytest.raises(Stop):
+        gb.detection_benchmark(root, "cornell", out, **opts)
+    lines = (out / "results.jsonl").read_text().splitlines()
+    assert [json.loads(r)["image_id"] for r in lines] == detected  # written before the stop
+    assert trained == [0] and len(list((out / "models").glob("*_fold0.json"))) == 1
+
+    def spy_detect(det, s, *a):
+        detected.append(s.image_id)
+        return real_detect(det, s, *a)
+
+    monkeypatch.setattr(gb, "_detect_one", spy_detect)
+    resumed = gb.detection_benchmark(root, "cornell", out, **opts)
+    assert trained == [0, 1]  # fold 0's saved model is reused, fold 1 trained once
+    assert len(detected) == len(set(detected)) == 4  # every image once, over both runs
+    whole = gb.detection_benchmark(root, "cornell", tmp_path / "whole", **opts)
+    assert [(r["image_id"], r["fold"], r["success"]) for r in resumed["per_image"]] == \
+        [(r["image_id"], r["fold"], r["success"]) for r in whole["per_image"]]
