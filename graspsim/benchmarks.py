@@ -11,7 +11,7 @@ import numpy as np
 from dlsr import recognition as rec
 from dlsr.features import ENCODERS, LEARNERS
 from dlsr.metrics import jaccard_matrix, rectangle_metric
-from dlsr.records import file_errors, read_json, read_jsonl, write_text_atomic
+from dlsr.records import CorruptFileError, file_errors, read_json, read_jsonl, write_text_atomic
 
 log = logging.getLogger(__name__)
 
@@ -563,13 +563,16 @@ def selftaught_benchmark(data, format: str, extra_patches, out,
     (self-taught); the two are compared per image by an exact McNemar test
     (:func:`paired_detection_test`). Each run lives in ``out/<combination>_<standard|
     selftaught>`` and resumes there; ``out/table3.json`` and ``out/table3.md`` are rewritten
-    after every combination, so an interrupted run keeps the finished rows.
+    after every combination, so an interrupted run keeps the finished rows. Rows of other
+    combinations already in ``out/table3.json`` with the same configuration (data, patches,
+    options) are kept, in their place, so a run of one combination adds its row to the table
+    (a row of the same combination is replaced); a table of another configuration is replaced.
 
     Returns
     -------
     dict
         ``rows``: per combination, the two accuracies, images right, the test and the run
-        folders; ``config``: the shared options.
+        folders (this run's combinations and the kept ones); ``config``: the shared options.
     """
     import json
 
@@ -587,6 +590,7 @@ def selftaught_benchmark(data, format: str, extra_patches, out,
                          "extra_patches": str(extra_patches), "n_extra_patches": n_extra,
                          **{k: v for k, v in detection_options.items() if k != "executor"}},
               "rows": []}
+    result["rows"] = _table3_rows_kept(out / "table3.json", result["config"])
     for combo in combinations:
         learner, encoder = combo.split("-")
         runs = {}
@@ -597,7 +601,7 @@ def selftaught_benchmark(data, format: str, extra_patches, out,
                                                 progress=progress, **detection_options)
             runs[variant]["folder"] = str(folder)
         test = paired_detection_test(runs["selftaught"], runs["standard"])
-        result["rows"].append({
+        row = {
             "combination": combo,
             "standard": runs["standard"]["accuracy"],
             "selftaught": runs["selftaught"]["accuracy"],
@@ -606,10 +610,36 @@ def selftaught_benchmark(data, format: str, extra_patches, out,
             "baselines": runs["standard"]["baselines"],
             "encoder_param": runs["standard"]["config"]["encoder_param"],
             "folders": {v: runs[v]["folder"] for v in runs},
-        })
-        (out / "table3.json").write_text(json.dumps(result, indent=2))
-        (out / "table3.md").write_text(table3_markdown(result))
+        }
+        at = [i for i, r in enumerate(result["rows"]) if r["combination"] == combo]
+        if at:
+            result["rows"][at[0]] = row
+        else:
+            result["rows"].append(row)
+        write_text_atomic(out / "table3.json", json.dumps(result, indent=2))
+        write_text_atomic(out / "table3.md", table3_markdown(result))
     return result
+
+
+def _table3_rows_kept(path, config: dict) -> list[dict]:
+    """The rows of an earlier ``table3.json`` at ``path`` when its configuration is ``config``.
+
+    A missing file, or a table of another configuration, gives no rows (the table is then
+    rewritten); a corrupt file is an error naming it (:func:`dlsr.records.read_json`).
+    """
+    import json
+
+    if not Path(path).is_file():
+        return []
+    earlier = read_json(path, "Table 3 results")
+    if earlier.get("config") != json.loads(json.dumps(config)):
+        return []
+    rows = earlier.get("rows")
+    if not isinstance(rows, list) or not all(isinstance(r, dict) and "combination" in r
+                                             for r in rows):
+        raise CorruptFileError(f"Table 3 results {path}: 'rows' must be a list of rows, "
+                               f"each with its 'combination'")
+    return rows
 
 
 def table3_markdown(result: dict) -> str:

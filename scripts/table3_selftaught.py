@@ -6,6 +6,8 @@ twice, without and with the unlabelled patches of ``--patches`` (e.g. ``graspsim
 --objects train --n 100000 --out patches.npz``) joined to dictionary learning, and the two are
 compared per image by an exact McNemar test. Writes ``<out>/table3.md`` and ``table3.json``
 after every combination and prints the rows as JSON; rerun with the same ``--out`` to resume.
+Rows of other combinations already in ``<out>/table3.json`` with the same options are kept, so
+``--combinations NKM-SC`` adds that row to an earlier table.
 
 Usage: python scripts/table3_selftaught.py --patches runs/patches_train.npz
        [--data ../shared/data/jacquard_samples --format jacquard] [--out runs/table3]

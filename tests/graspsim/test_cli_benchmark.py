@@ -354,3 +354,40 @@ def test_detection_benchmark_interrupted_keeps_images_and_fold_models(tmp_path, 
     whole = gb.detection_benchmark(root, "cornell", tmp_path / "whole", **opts)
     assert [(r["image_id"], r["fold"], r["success"]) for r in resumed["per_image"]] == \
         [(r["image_id"], r["fold"], r["success"]) for r in whole["per_image"]]
+
+
+def test_selftaught_benchmark_adds_its_rows_to_the_table_of_the_same_configuration(
+        tmp_path, monkeypatch):
+    import graspsim.benchmarks as gb
+    from dlsr.records import CorruptFileError
+
+    patches = _patch_file(tmp_path / "extra.npz", n=50)
+    outcome = {"standard": [True, True, False, False], "selftaught": [True, False, True, True]}
+
+    def fake(data, format, out, learner, encoder, extra_patches, progress, **kw):
+        wins = outcome["standard" if extra_patches is None else "selftaught"]
+        return {"accuracy": sum(wins) / 4, "baselines": {"random": 0.25},
+                "config": {"encoder_param": None},
+                "per_image": [{"image_id": f"i{k}", "success": w} for k, w in enumerate(wins)]}
+
+    monkeypatch.setattr(gb, "detection_benchmark", fake)
+    out = tmp_path / "o"
+
+    def run(combos, **kw):
+        gb.selftaught_benchmark("d", "jacquard", patches, out, combinations=combos,
+                                **{"n_atoms": 12, **kw})
+        table = json.loads((out / "table3.json").read_text())
+        return [(r["combination"], r["selftaught"]) for r in table["rows"]]
+
+    assert run(["NKM-Natural", "GSVQ-ST"]) == [("NKM-Natural", 0.75), ("GSVQ-ST", 0.75)]
+    outcome["selftaught"] = [False] * 4
+    # one combination later: the other rows stay, its own is added or replaced in place
+    assert run(["NKM-SC"]) == [("NKM-Natural", 0.75), ("GSVQ-ST", 0.75), ("NKM-SC", 0.0)]
+    assert run(["NKM-Natural"]) == [("NKM-Natural", 0.0), ("GSVQ-ST", 0.75), ("NKM-SC", 0.0)]
+    md = (out / "table3.md").read_text()
+    assert md.count("| NKM-SC |") == md.count("| GSVQ-ST |") == md.count("| NKM-Natural |") == 1
+    # another configuration starts a new table
+    assert run(["GSVQ-ST"], n_atoms=20) == [("GSVQ-ST", 0.0)]
+    (out / "table3.json").write_text('{"config": {"data": "d"')
+    with pytest.raises(CorruptFileError, match="table3.json"):
+        run(["GSVQ-ST"], n_atoms=20)
