@@ -96,6 +96,9 @@ class GraspSample:
         The file (or folder) the sample came from, for error messages.
     mask : ndarray of shape (H, W), bool, or None
         Object mask when the dataset has one (Jacquard, simulation).
+    K : ndarray of shape (3, 3) or None
+        Camera matrix when the dataset records it (graspsim datasets: ``pcdXXXXcamera.json``);
+        needed to measure rectangles in metres (:mod:`dlsr.detection.physical`).
     """
 
     image_id: str
@@ -107,6 +110,7 @@ class GraspSample:
     negatives: list[GraspRectangle] = field(default_factory=list)
     source: Path | None = None
     mask: np.ndarray | None = None
+    K: np.ndarray | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -377,7 +381,40 @@ def resize_sample(sample: GraspSample, scale: float) -> GraspSample:
         mask=None if sample.mask is None else rz(sample.mask.astype(np.uint8), near).astype(bool),
         positives=rr(sample.positives),
         negatives=rr(sample.negatives),
+        K=None if sample.K is None else _scaled_K(sample.K, sx, sy),
     )
+
+
+def _scaled_K(K, sx: float, sy: float) -> np.ndarray:
+    """The camera matrix of an image resized by ``(sx, sy)`` (pixel centres map as
+    :meth:`GraspRectangle.scaled`: ``x' = (x + 0.5) sx - 0.5``)."""
+    K = np.array(K, dtype=float)
+    K[0, 0] *= sx
+    K[1, 1] *= sy
+    K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+    K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+    return K
+
+
+def read_camera_matrix(path) -> np.ndarray:
+    """The 3x3 ``K`` of a camera file (``pcdXXXXcamera.json``, :mod:`graspsim.datagen`).
+
+    Raises
+    ------
+    ValueError
+        Not JSON, no ``K``, or not a 3x3 matrix with positive focal lengths (naming the file).
+    """
+    import json
+
+    path = Path(path)
+    try:
+        K = np.asarray(json.loads(path.read_text())["K"], dtype=float)
+    except (ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"camera file {path}: no readable 'K' ({e})") from e
+    if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise ValueError(f"camera file {path}: 'K' must be a 3x3 matrix with positive focal "
+                         f"lengths, got {K.tolist()}")
+    return K
 
 
 # --------------------------------------------------------------------------------------------
@@ -409,6 +446,7 @@ def load_cornell(
       (float32 metres from the common preprocessing; 0, negative or non-finite means missing);
     * ``pcdXXXXcpos.txt`` / ``pcdXXXXcneg.txt``: positive / negative rectangles (see
       :func:`read_cornell_rectangles`). An image without them loads with no rectangles (logged).
+    * optionally ``pcdXXXXcamera.json`` (graspsim datasets): the camera matrix, ``sample.K``.
 
     Parameters
     ----------
@@ -494,6 +532,8 @@ def load_cornell(
             positives=rects["cpos"],
             negatives=rects["cneg"],
             source=rgb_path,
+            K=(read_camera_matrix(folder / f"{stem}camera.json")
+               if (folder / f"{stem}camera.json").is_file() else None),
         )
         samples.append(resize_sample(sample, scale) if scale != 1.0 else sample)
     ids = [s.image_id for s in samples]

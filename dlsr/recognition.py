@@ -100,6 +100,8 @@ class RecognitionData:
         1 for a positive (graspable) rectangle, 0 for a negative.
     image_ids, object_ids : ndarray of shape (n,), object
         The image and object each rectangle comes from (object ids may be None).
+    rects : ndarray of shape (n, 5) or None
+        The rectangles themselves, pixels and radians (None when not recorded).
     """
 
     images: np.ndarray
@@ -107,6 +109,7 @@ class RecognitionData:
     labels: np.ndarray
     image_ids: np.ndarray
     object_ids: np.ndarray
+    rects: np.ndarray | None = None
 
     def __len__(self):
         return len(self.labels)
@@ -159,7 +162,7 @@ def recognition_data(
     """
     from .datasets import sample_negatives
     from .preprocess import rectangle_images
-    from .rectangles import array_to_rects
+    from .rectangles import array_to_rects, rects_to_array
 
     if max_rectangles is not None and int(max_rectangles) < 1:
         raise ValueError(f"max_rectangles must be at least 1, got {max_rectangles!r}")
@@ -188,7 +191,7 @@ def recognition_data(
         keep[:] = False
         keep[np.random.default_rng(subset_random_state).choice(total, max_rectangles,
                                                                replace=False)] = True
-    images, masks, labels, image_ids, object_ids = [], [], [], [], []
+    images, masks, labels, image_ids, object_ids, kept = [], [], [], [], [], []
     start = 0
     for s, rects, y in labelled:
         sel = np.flatnonzero(keep[start:start + len(rects)])
@@ -200,11 +203,13 @@ def recognition_data(
         images.append(im)
         masks.append(mk)
         labels.append(y[sel])
+        kept.append(rects_to_array([rects[i] for i in sel]))
         image_ids += [s.image_id] * sel.size
         object_ids += [s.object_id] * sel.size
     return RecognitionData(
         np.concatenate(images), np.concatenate(masks), np.concatenate(labels),
         np.asarray(image_ids, dtype=object), np.asarray(object_ids, dtype=object),
+        np.concatenate(kept),
     )
 
 

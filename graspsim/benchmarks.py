@@ -194,8 +194,8 @@ def detection_benchmark(
     region: str = "auto", rescore: int = 300, clear_jaws: bool = False,
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
     save_model=None, extra_patches=None, extra_train=None, extra_format: str | None = None,
-    extra_scale=None, extra_mapping=None, model=None, seed: int = 0, progress: bool = True,
-    executor=None,
+    extra_scale=None, extra_mapping=None, model=None, physical: bool = False, seed: int = 0,
+    progress: bool = True, executor=None,
 ) -> dict:
     """Cross-validated detection accuracy by the rectangle metric (the paper's Table 2).
 
@@ -213,7 +213,12 @@ def detection_benchmark(
     configuration skips finished images and reuses saved fold models.
 
     ``clear_jaws`` searches only rectangles whose jaws come down beside the object region
-    (:attr:`dlsr.detection.SearchGrid.clear_jaws`; detection only, the training is the same).
+    (:attr:`dlsr.detection.SearchGrid.clear_jaws`; detection only, the training is the same);
+    with ``detector="lattice"`` (:class:`dlsr.detection.LatticeDetector`, whose candidates span
+    the object by construction) it keeps the openings within this gripper's reach
+    (:data:`graspsim.gripper.MAX_OPENING`), which needs the images' camera matrices.
+    ``physical`` trains each fold's SVM with the rectangles' physical features
+    (``train_detector(physical=True)``; graspsim datasets record the camera matrices it needs).
 
     ``extra_patches`` (a patch file, :func:`dlsr.patches.load_patch_file`) joins unlabelled
     patches to each fold's whitening and dictionary learning only (self-taught learning, the
@@ -252,19 +257,22 @@ def detection_benchmark(
     from tqdm.auto import tqdm
 
     from dlsr import datasets
-    from dlsr.detection import DLSRDetector, check_training_options, train_detector
+    from dlsr.detection import DETECTOR_KINDS, DLSRDetector, check_training_options, train_detector
     from dlsr.rectangles import as_rect_array
     from dlsr.viz import draw_rectangles
 
     from .detectors import MaskPCADetector
 
-    if detector not in ("dense", "exact"):
-        raise ValueError(f"detector must be 'dense' or 'exact', got {detector!r}")
+    if detector not in DETECTOR_KINDS:
+        raise ValueError(f"detector must be one of {DETECTOR_KINDS}, got {detector!r}")
+    if physical and hard_negatives:
+        raise ValueError("physical features and hard_negatives do not go together yet")
     if model is not None:
         refused = [name for name, value, default in (
             ("extra_patches", extra_patches, None), ("extra_train", extra_train, None),
             ("save_model", save_model, None), ("recognition_json", recognition_json, None),
             ("fit_grid", fit_grid, None), ("hard_negatives", hard_negatives, 0),
+            ("physical", physical, False),
             ("encoder_param", encoder_param, None), ("C", C, None)) if value != default]
         if refused:
             raise ValueError(f"a saved model is evaluated without training: "
@@ -341,6 +349,8 @@ def detection_benchmark(
     # options added later enter the keys only when used: earlier runs' results still match
     if clear_jaws:
         config["clear_jaws"] = True
+    if physical:
+        config["physical"] = True
     if hard_negatives:
         config["hard_negatives"] = int(hard_negatives)
         if hard_rounds != 1:
@@ -357,7 +367,7 @@ def detection_benchmark(
                                         "encoder_param", "C", "n_folds", "n_atoms",
                                         "n_patches", "grid_negatives", "fit_grid", "region",
                                         "n_images", "seed", "hard_negatives", "hard_rounds",
-                                        "extra_patches", "extra_train")
+                                        "extra_patches", "extra_train", "physical")
                  if k in config}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
@@ -387,13 +397,10 @@ def detection_benchmark(
                 encoder_param=encoder_param, C=C, n_atoms=n_atoms, n_patches=n_patches,
                 grid_negatives=grid_negatives, fit_grid=fit_grid,
                 hard_negatives=hard_negatives, hard_rounds=hard_rounds, extra_patches=extra,
-                random_state=seed + k, region=region)
+                physical=physical, random_state=seed + k, region=region)
             fold_model.save(mpath)
-        det = fold_model.detector(detector, region=region, rescore=rescore,
-                                  **({"coarse_to_fine": True} if coarse_to_fine else {})) \
-            if detector == "dense" else fold_model.detector("exact", region=region)
-        if clear_jaws:
-            det.grid = dataclasses.replace(det.grid, clear_jaws=True)
+        det = _benchmark_detector(fold_model, detector, region, rescore, coarse_to_fine,
+                                  clear_jaws)
         tasks = [(det, samples[i], baselines, seed + i, {"config_key": key, "fold": k})
                  for i in todo]
         for rec_ in ex.imap(_detect_one, tasks, desc=f"fold {k}", star=True):
@@ -458,10 +465,29 @@ def detection_benchmark(
                               n_patches=n_patches, grid_negatives=grid_negatives,
                               fit_grid=fit_grid, hard_negatives=hard_negatives,
                               hard_rounds=hard_rounds, extra_patches=extra, random_state=seed,
-                              detector=detector, region=region, rescore=rescore)
+                              physical=physical, detector=detector, region=region,
+                              rescore=rescore)
         full.save(save_model)
         summary["model"] = str(save_model)
     return summary
+
+
+def _benchmark_detector(model, kind: str, region: str, rescore: int, coarse_to_fine: bool,
+                        clear_jaws: bool):
+    """The detector of :func:`detection_benchmark` on a (fold) model."""
+    if kind == "lattice":
+        from .gripper import MAX_OPENING
+
+        return model.detector("lattice", region=region,
+                              max_width=MAX_OPENING if clear_jaws else None)
+    if kind == "exact":
+        det = model.detector("exact", region=region)
+    else:
+        det = model.detector("dense", region=region, rescore=rescore,
+                             **({"coarse_to_fine": True} if coarse_to_fine else {}))
+    if clear_jaws:
+        det.grid = dataclasses.replace(det.grid, clear_jaws=True)
+    return det
 
 
 def table2_markdown(summary: dict) -> str:

@@ -382,8 +382,10 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5) -> GripperAwareDetec
     :class:`~dlsr.detection.ExactGridDetector`) is first told to search only rectangles whose
     jaws come down beside the object region (``SearchGrid.clear_jaws``) with an opening the
     gripper reaches (``SearchGrid.max_width``, :data:`graspsim.gripper.MAX_OPENING`), and to
-    return its best ``top_k`` (rescoring at least as many exactly); any other detector is
-    wrapped as it is.
+    return its best ``top_k`` (rescoring at least as many exactly); a
+    :class:`dlsr.detection.LatticeDetector` (whose candidates already span the object) is told
+    the gripper's reach and to return its best ``top_k``; any other detector is wrapped as it
+    is.
 
     Parameters
     ----------
@@ -398,11 +400,16 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5) -> GripperAwareDetec
     """
     import dataclasses
 
-    from dlsr.detection import DenseDetector, ExactGridDetector
+    from dlsr.detection import DenseDetector, ExactGridDetector, LatticeDetector
 
     from .gripper import MAX_OPENING
 
-    if isinstance(detector, DenseDetector | ExactGridDetector):
+    if isinstance(detector, LatticeDetector):
+        detector = copy.copy(detector)
+        if detector.max_width is None or detector.max_width > MAX_OPENING:
+            detector.max_width = MAX_OPENING
+        detector.top_k = max(int(top_k), int(detector.top_k))
+    elif isinstance(detector, DenseDetector | ExactGridDetector):
         detector = copy.copy(detector)
         detector.grid = dataclasses.replace(detector.grid, clear_jaws=True,
                                             max_width=MAX_OPENING)

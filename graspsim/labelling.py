@@ -19,6 +19,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from dlsr.detection.lattice import chord, chords, lattice_candidates, lattice_step
+from dlsr.detection.lattice import max_width_px as _max_width_px
+from dlsr.detection.physical import mask_axes
 from dlsr.rectangles import GraspRectangle
 
 from .execution import ExecutionParams, GraspResult, precheck_grasps, run_grasp
@@ -68,39 +71,6 @@ class Labelled:
         return [g for g, r in zip(self.rects, self.results, strict=True) if not r.success]
 
 
-def mask_axes(mask) -> tuple[np.ndarray, float, np.ndarray]:
-    """Centroid, minor-axis angle and pixel coordinates of a mask.
-
-    Parameters
-    ----------
-    mask : ndarray of shape (H, W), bool
-
-    Returns
-    -------
-    centroid : ndarray of shape (2,)
-        ``(x, y)`` pixels.
-    theta_minor : float
-        Angle of the minor axis (counter-clockwise as displayed, the rectangle convention).
-    xy : ndarray of shape (n, 2)
-        ``(x, y)`` of the mask pixels.
-
-    Raises
-    ------
-    ValueError
-        If the mask is empty.
-    """
-    ys, xs = np.nonzero(np.asarray(mask, dtype=bool))
-    if len(xs) == 0:
-        raise ValueError("the object mask is empty")
-    xy = np.column_stack([xs, ys]).astype(float)
-    c = xy.mean(axis=0)
-    d = xy - c
-    cov = d.T @ d / max(len(xy), 1)
-    _, vecs = np.linalg.eigh(cov)
-    minor = vecs[:, 0]
-    return c, float(np.arctan2(-minor[1], minor[0])), xy
-
-
 def extent_along(xy, centre, theta, half_band) -> float:
     """Extent (pixels) of mask pixels ``xy`` along ``theta`` in a band through ``centre``."""
     u = np.array([np.cos(theta), -np.sin(theta)])
@@ -112,52 +82,6 @@ def extent_along(xy, centre, theta, half_band) -> float:
         return 0.0
     a = along[band]
     return float(2 * max(a.max(), -a.min()))
-
-
-def chord(inside, centre, theta, max_px: float = 120.0) -> tuple[float, float]:
-    """Contiguous run of ``inside`` pixels through ``centre`` along ``theta``.
-
-    Returns
-    -------
-    (lo, hi) : offsets in pixels along the direction (``lo <= 0 <= hi``); ``(0, 0)`` when the
-    centre itself is outside.
-    """
-    lo, hi = chords(inside, centre, np.array([theta]), max_px)
-    return float(lo[0]), float(hi[0])
-
-
-def chords(inside, centre, thetas, max_px: float = 120.0) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`chord` for several directions at once.
-
-    Parameters
-    ----------
-    inside : ndarray of shape (H, W), bool
-    centre : ndarray of shape (2,)
-        ``(x, y)`` pixels.
-    thetas : ndarray of shape (k,)
-        Radians.
-    max_px : float
-        Longest run followed in each direction, pixels.
-
-    Returns
-    -------
-    lo, hi : ndarray of shape (k,)
-        Offsets in pixels along each direction.
-    """
-    H, W = inside.shape
-    thetas = np.asarray(thetas, dtype=float)
-    u = np.column_stack([np.cos(thetas), -np.sin(thetas)])
-    t = np.arange(0.0, max_px + 1.0)
-    ends = []
-    for sgn in (1.0, -1.0):
-        pts = np.rint(np.asarray(centre, float)[None, None, :]
-                      + sgn * t[None, :, None] * u[:, None, :]).astype(int)
-        ok = (pts[..., 0] >= 0) & (pts[..., 0] < W) & (pts[..., 1] >= 0) & (pts[..., 1] < H)
-        run = np.zeros(ok.shape, dtype=bool)
-        run[ok] = inside[pts[..., 1][ok], pts[..., 0][ok]]
-        stop = np.where(run.all(axis=1), len(t), np.argmin(run, axis=1))
-        ends.append(np.maximum(stop - 1, 0) * sgn)
-    return ends[1].astype(float), ends[0].astype(float)
 
 
 SAMPLERS = ("mixed", "dense")
@@ -256,31 +180,8 @@ def sample_candidates(segmentation, object_ids, rng: np.random.Generator, n: int
 
 
 def max_width_px(z, theta, intrinsics, max_opening: float = MAX_OPENING):
-    """Widest rectangle opening (pixels) the gripper can reach, from depth and intrinsics.
-
-    The inverse of :func:`graspsim.grasp.rectangle_to_grasp`'s width ``w z |(cos/fx, sin/fy)|``
-    (``w z / f`` when ``fx = fy``).
-
-    Parameters
-    ----------
-    z : float or ndarray
-        Depth of the surface under the centre, metres (> 0).
-    theta : float or ndarray
-        Closing direction, radians; broadcast with ``z``.
-    intrinsics : CameraIntrinsics or ndarray of shape (3, 3)
-    max_opening : float
-        Metres.
-
-    Returns
-    -------
-    float or ndarray
-        Pixels.
-    """
-    K = np.asarray(getattr(intrinsics, "K", intrinsics), dtype=float)
-    if K.shape != (3, 3):
-        raise ValueError(f"intrinsics must provide a 3x3 K, got shape {K.shape}")
-    scale = np.hypot(np.cos(theta) / K[0, 0], np.sin(theta) / K[1, 1])
-    return max_opening / (np.asarray(z, dtype=float) * scale)
+    """:func:`dlsr.detection.lattice.max_width_px` for this gripper (``MAX_OPENING`` metres)."""
+    return _max_width_px(z, theta, intrinsics, max_opening)
 
 
 def dense_candidates(segmentation, object_ids, rng: np.random.Generator, depth, intrinsics,
@@ -354,60 +255,13 @@ def dense_candidates(segmentation, object_ids, rng: np.random.Generator, depth, 
         raise ValueError(f"the candidate budget n must be >= 1 or None, got {n}")
     if n_angles < 1:
         raise ValueError(f"n_angles must be >= 1, got {n_angles}")
-    lo_h, hi_h = float(jaw_px[0]), float(jaw_px[1])
-    jaws = sorted({round(lo_h + 0.25 * (hi_h - lo_h), 2), round(hi_h - 0.25 * (hi_h - lo_h), 2)})
-    step = 0.5 * jaws[0] if spacing is None else float(spacing)
-    if not step > 0:
-        raise ValueError(f"spacing must be > 0, got {spacing}")
-    H, W = seg.shape
-    thetas = -np.pi / 2 + np.pi * np.arange(n_angles) / n_angles
+    _, step = lattice_step(jaw_px, spacing)
     offset = rng.uniform(0.0, step, size=2)
     out: list[GraspRectangle] = []
-    seen = set()
+    seen: set = set()
     for b in object_ids:
-        full = seg == b
-        if full.sum() < 5:
-            continue
-        ys, xs = np.nonzero(full)
-        # Work in the mask's bounding box (plus a pixel): chords never leave the mask.
-        x0, y0 = max(xs.min() - 1, 0), max(ys.min() - 1, 0)
-        x1, y1 = min(xs.max() + 2, W), min(ys.max() + 2, H)
-        mask, dep = full[y0:y1, x0:x1], depth[y0:y1, x0:x1]
-        h_, w_ = mask.shape
-        gx = np.arange(xs.min() - x0 + offset[0] - step, xs.max() - x0 + 1.0, step)
-        gy = np.arange(ys.min() - y0 + offset[1] - step, ys.max() - y0 + 1.0, step)
-        px, py = np.meshgrid(gx, gy)
-        px, py = px.ravel(), py.ravel()
-        ix, iy = np.rint(px).astype(int), np.rint(py).astype(int)
-        ok = (ix >= 0) & (ix < w_) & (iy >= 0) & (iy < h_)
-        ok[ok] = mask[iy[ok], ix[ok]] & (dep[iy[ok], ix[ok]] > 0)
-        for x, y, i, j in zip(px[ok], py[ok], ix[ok], iy[ok], strict=True):
-            pt = np.array([x, y])
-            zc = dep[j, i]
-            near = mask & (dep > 0) & (dep < zc + depth_band)
-            runs_mask = np.column_stack(chords(mask, pt, thetas))
-            runs_near = np.column_stack(chords(near, pt, thetas))
-            for k, th in enumerate(thetas):
-                u = np.array([np.cos(th), -np.sin(th)])
-                runs = {tuple(runs_mask[k]), tuple(runs_near[k])}
-                for lo, hi in sorted(runs):
-                    length = hi - lo
-                    c = pt + 0.5 * (lo + hi) * u
-                    ci = int(np.clip(np.rint(c[0]), 0, w_ - 1))
-                    cj = int(np.clip(np.rint(c[1]), 0, h_ - 1))
-                    z = dep[cj, ci] if dep[cj, ci] > 0 else zc
-                    c = c + (x0, y0)
-                    w_max = reach * float(max_width_px(z, th, intrinsics, max_opening))
-                    for w in (length + margin_px, 1.3 * length + 2 * margin_px):
-                        if w > w_max:
-                            continue
-                        for h in jaws:
-                            key = (round(c[0]), round(c[1]), k, round(w / 2), h)
-                            if key in seen:
-                                continue
-                            seen.add(key)
-                            out.append(GraspRectangle(float(c[0]), float(c[1]), float(th),
-                                                      float(w), float(h)))
+        out += lattice_candidates(seg == b, depth, intrinsics, offset, max_opening, jaw_px,
+                                  spacing, n_angles, margin_px, depth_band, reach, seen)
     if n is not None and len(out) > n:
         keep = np.sort(rng.choice(len(out), size=n, replace=False))
         out = [out[i] for i in keep]

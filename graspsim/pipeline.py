@@ -61,7 +61,17 @@ class RunConfig:
         Cross-validation folds (object-wise) for recognition and detection.
     C : float
         SVM cost used for detection and the final model.
-    detector : {"dense", "exact"}
+    detector : {"lattice", "dense", "exact"}
+        DLSR's search: ``"lattice"`` (default) ranks rectangles fitted to the object region
+        (:class:`dlsr.detection.LatticeDetector`: at lattice points every 15 degrees, openings
+        from the region's chords within the gripper's reach, the labeller's candidates drawn
+        from the observation); ``"dense"`` / ``"exact"``: the paper's grid search. Not in the
+        paper (see the README for the validation that chose it).
+    physical : bool
+        Train DLSR's SVM with the rectangles' physical features beside the DLSR features
+        (``train_detector(physical=True)``, :mod:`dlsr.detection.physical`: opening and jaw size
+        in metres, heights of the centre and the finger footprints above the table, place on
+        the object's axes). Not in the paper.
     coarse_to_fine : bool
         Dense detector: coarse scales and angles first, then the full grid around the best few.
     rescore : int
@@ -82,8 +92,10 @@ class RunConfig:
         In the trials, DLSR searches only rectangles this gripper can execute
         (:func:`graspsim.detectors.gripper_aware`: jaws beside the object, opening within
         reach, its best 40 checked against the depth image for fingers landing on a seen
-        surface); the same model with the paper's search then also runs, as ``dlsr-paper``.
-        Not in the paper.
+        surface). Not in the paper. When any of ``detector``, ``physical`` and
+        ``gripper_aware`` departs from the paper, the paper's configuration also runs in the
+        trials, as ``dlsr-paper``: a model trained the paper's way on the same images
+        (``model/dlsr-paper``, with ``physical``), the paper's grid search (``"dense"``).
     trials : int
         Simulated grasp trials per detector on the test objects.
     trial_candidates : int
@@ -108,7 +120,8 @@ class RunConfig:
     folds: int = 5
     inner_folds: int = 3
     C: float = 1.0
-    detector: str = "dense"
+    detector: str = "lattice"
+    physical: bool = True
     coarse_to_fine: bool = True
     rescore: int = 50
     detection_images: int | None = None
@@ -132,8 +145,12 @@ class RunConfig:
             raise ValueError(f"learner must be one of {LEARNERS}, got {self.learner!r}")
         if self.encoder not in ENCODERS:
             raise ValueError(f"encoder must be one of {ENCODERS}, got {self.encoder!r}")
-        if self.detector not in ("dense", "exact"):
-            raise ValueError(f"detector must be 'dense' or 'exact', got {self.detector!r}")
+        from dlsr.detection import DETECTOR_KINDS
+
+        if self.detector not in DETECTOR_KINDS:
+            raise ValueError(f"detector must be one of {DETECTOR_KINDS}, got {self.detector!r}")
+        if self.physical and self.hard_negatives:
+            raise ValueError("physical features and hard_negatives do not go together yet")
         if not self.grid_negatives >= 0:
             raise ValueError(f"grid_negatives must be >= 0, got {self.grid_negatives}")
         for name in ("scenes", "candidates", "n_atoms", "n_patches", "folds", "trials"):
@@ -384,28 +401,34 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
             coarse_to_fine=config.coarse_to_fine, rescore=config.rescore,
             max_images=config.detection_images, fit_grid=config.fit_grid,
             hard_negatives=config.hard_negatives, hard_rounds=config.hard_rounds,
-            grid_negatives=config.grid_negatives, clear_jaws=config.gripper_aware, executor=ex,
+            grid_negatives=config.grid_negatives, clear_jaws=config.gripper_aware,
+            physical=config.physical, executor=ex,
         )
         stages.finish("detection", {
             k: det.get(k) for k in ("accuracy", "baselines", "seconds_per_image")
         } | {"seconds": time.perf_counter() - t0})
 
-    # 4. The final detector, trained on every synthetic image.
+    # 4. The final detector, trained on every synthetic image (and, with physical features,
+    #    the paper's model beside it for the dlsr-paper trials).
     model_path = root / "model" / "dlsr"
-    if not stages.done("model"):
-        from dlsr.detection import train_detector
+    from dlsr.detection import train_detector
 
+    for key, path, physical in (("model", model_path, config.physical),
+                                ("model-paper", _paper_model_path(root, config), False)):
+        if path == model_path and key != "model" or stages.done(key):
+            continue
         t0 = time.perf_counter()
         model = train_detector(samples, learner=config.learner, encoder=config.encoder,
                                C=config.C, n_atoms=config.n_atoms, n_patches=config.n_patches,
-                               random_state=seeds["model"], detector=config.detector,
+                               random_state=seeds["model"],
+                               detector=config.detector if key == "model" else "dense",
                                fit_grid=config.fit_grid, hard_negatives=config.hard_negatives,
                                hard_rounds=config.hard_rounds,
-                               grid_negatives=config.grid_negatives)
-        model_path.parent.mkdir(parents=True, exist_ok=True)
-        paths = model.save(model_path)
-        stages.finish("model", {"paths": [str(p) for p in paths],
-                                "seconds": time.perf_counter() - t0})
+                               grid_negatives=config.grid_negatives, physical=physical)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        paths = model.save(path)
+        stages.finish(key, {"paths": [str(p) for p in paths],
+                            "seconds": time.perf_counter() - t0})
 
     # 5. Simulated grasp trials on the held-out test objects.
     trial_stage(root, config, stages, model_path, seeds["trials"], ex, progress)
@@ -450,20 +473,35 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
         stages.finish(key, s)
 
 
+def departs_from_paper(config: RunConfig) -> bool:
+    """Whether DLSR's trial configuration is not the paper's (then ``dlsr-paper`` runs)."""
+    return config.gripper_aware or config.physical or config.detector == "lattice"
+
+
 def trial_names(config: RunConfig) -> list[str]:
     """The detectors of the trial stage, DLSR first: ``dlsr``, ``dlsr-paper`` (the paper's
-    search, when ``gripper_aware``), then the baselines."""
-    return ["dlsr", *(["dlsr-paper"] if config.gripper_aware else []), *config.baselines]
+    configuration, when :func:`departs_from_paper`), then the baselines."""
+    return ["dlsr", *(["dlsr-paper"] if departs_from_paper(config) else []),
+            *config.baselines]
+
+
+def _paper_model_path(root: Path, config: RunConfig) -> Path:
+    """The model of the ``dlsr-paper`` trials: its own when DLSR's is trained with physical
+    features, else DLSR's."""
+    return root / "model" / ("dlsr-paper" if config.physical else "dlsr")
 
 
 def _trial_detector(name: str, model_path: Path, config: RunConfig):
     if name in ("dlsr", "dlsr-paper"):
         from dlsr.detection import DLSRDetector
 
+        kind = config.detector if name == "dlsr" else "dense"
+        if name == "dlsr-paper":
+            model_path = _paper_model_path(model_path.parent.parent, config)
         options = {}
-        if config.detector == "dense":
+        if kind == "dense":
             options = {"coarse_to_fine": config.coarse_to_fine, "rescore": config.rescore}
-        det = DLSRDetector.load(model_path).detector(config.detector, **options)
+        det = DLSRDetector.load(model_path).detector(kind, **options)
         if name == "dlsr" and config.gripper_aware:
             from .detectors import gripper_aware
 

@@ -447,11 +447,22 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
     training = ("the paper's training (labelled rectangles only)" if not config.grid_negatives
                 else f"{config.grid_negatives:g} negative(s) per labelled rectangle from its "
                      f"own search grid")
-    search = ("gripper-aware search (not in the paper): only rectangles whose jaws come down "
-              "beside the object with an opening the gripper reaches, and of its best 40 the "
-              "first whose fingers land on no surface seen in the depth image; `dlsr-paper` "
-              "is the same model with the paper's search" if config.gripper_aware
-              else "the paper's search")
+    if config.physical:
+        training += (", with the rectangles' physical features in the SVM (not in the paper: "
+                     "opening in metres, heights of the centre and the finger footprints "
+                     "above the table, place on the object's axes)")
+    lattice = config.detector == "lattice"
+    search = ("rectangles fitted to the object region (not in the paper: lattice points "
+              "every 15 degrees, openings from the region's chords)" if lattice
+              else "the paper's grid search")
+    if config.gripper_aware:
+        search += (", gripper-aware (not in the paper): openings the gripper reaches"
+                   + ("" if lattice else " and jaws beside the object")
+                   + ", and of its best 40 the first whose fingers land on no surface seen in "
+                     "the depth image")
+    if config.gripper_aware or lattice or config.physical:
+        search += ("; `dlsr-paper` is the paper's configuration on the same images (the "
+                   "paper's training and grid search)")
     blocks.append(("p", f"DLSR: {training}; {search}. Labels: {config.label_sampler} "
                         f"candidates, {config.candidates} per image."))
 

@@ -84,6 +84,15 @@ Departures and choices (named options)
   (:func:`opening_widths`), a gripper reaches. ``graspsim`` sets it with ``clear_jaws`` in its
   gripper-aware search (:func:`graspsim.detectors.gripper_aware`) at detection time; the models
   it trains do not carry it.
+* Physical features in the SVM (``train_detector(physical=True)``, off by default;
+  :mod:`dlsr.detection.physical`): the rectangle's opening and jaw size in metres, the heights
+  of its centre and of the two finger footprints above the table, and its place on the object
+  region's principal axes, as quantile-bin indicators beside the DLSR features. Every detector
+  adds the model's physical term (:meth:`DLSRDetector.physical_scores`) to the DLSR score.
+* :class:`LatticeDetector` (``model.detector("lattice")``): instead of the grid, rectangles fitted
+  to the object region (lattice points every 15 degrees, openings from the region's chords, the
+  physics labeller's candidates of :mod:`graspsim.labelling`), at most 192 of them scored
+  exactly.
 
 Modules
 -------
@@ -93,6 +102,8 @@ Modules
   :func:`train_detector`;
 * :mod:`dlsr.detection.exact`: :class:`Detection`, :class:`ExactGridDetector`;
 * :mod:`dlsr.detection.dense`: :class:`DenseDetector`;
+* :mod:`dlsr.detection.lattice`: :func:`lattice_candidates`, :class:`LatticeDetector`;
+* :mod:`dlsr.detection.physical`: :func:`physical_features`, :class:`PhysicalEncoder`;
 * :mod:`dlsr.detection.files`: :func:`detect_files` (``graspsim detect``).
 
 Every name is importable from ``dlsr.detection``.
@@ -132,7 +143,9 @@ from .grid import (  # noqa: F401
     table_surface,
     within_reach,
 )
+from .lattice import LatticeDetector, lattice_candidates, max_width_px
 from .model import (  # noqa: F401
+    DETECTOR_KINDS,
     FORMAT_VERSION,
     GRID,
     PATCH,
@@ -143,6 +156,7 @@ from .model import (  # noqa: F401
     _default_preprocess,
     _jsonable,
 )
+from .physical import PHYSICAL_FEATURES, PhysicalEncoder, physical_features
 from .training import (
     _check_quantile,  # noqa: F401
     check_training_options,
@@ -155,6 +169,13 @@ from .training import (
 )
 
 __all__ = [
+    "DETECTOR_KINDS",
+    "LatticeDetector",
+    "lattice_candidates",
+    "max_width_px",
+    "PHYSICAL_FEATURES",
+    "PhysicalEncoder",
+    "physical_features",
     "SearchGrid",
     "PAPER_GRID",
     "COARSE_GRID",

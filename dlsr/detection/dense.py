@@ -27,6 +27,7 @@ from .grid import (
     _axes,
     _box_sums,
     jaws_clear,
+    table_surface,
     within_reach,
 )
 from .model import GRID, PATCH, PATCHES_PER_RECTANGLE, SIZE, SPLIT
@@ -347,16 +348,17 @@ class DenseDetector(_Base):
         if reason:
             return _empty(reason, t0)
         t1, c1 = time.perf_counter(), time.process_time()
+        physical = self._physical_term(obs, region)
         with _one_blas_thread(), self._pool() as pool:
             src = self._source(obs, cand)
             stride = self.coarse_stride if self.coarse_to_fine else 1
-            scores = self._dense_scores(src, cand, stats, pool, stride)
+            scores = self._dense_scores(src, cand, stats, pool, stride) + physical(cand)
             n_scored = len(cand)
             if self.coarse_to_fine:
                 seeds = cand[np.argsort(-scores, kind="stable")[: self.refine_top]]
                 fine = self._neighbourhood(obs, seeds, region)
                 if len(fine):  # the seeds are in it: rank the fine (stride-1) scores only
-                    scores = self._dense_scores(src, fine, stats, pool, 1)
+                    scores = self._dense_scores(src, fine, stats, pool, 1) + physical(fine)
                     cand = fine
                     n_scored += len(fine)
             t2, c2 = time.perf_counter(), time.process_time()
@@ -367,7 +369,7 @@ class DenseDetector(_Base):
             if n_rescore:
                 top = np.argsort(-scores, kind="stable")[:n_rescore]
                 cand = cand[top]
-                scores = self._exact_scores(obs, cand, pool)
+                scores = self._exact_scores(obs, cand, pool) + physical(cand)
                 n_exact = len(cand)
         order = np.argsort(-scores, kind="stable")[: self.top_k]
         t3, c3 = time.perf_counter(), time.process_time()
@@ -412,6 +414,14 @@ class DenseDetector(_Base):
             return self._exact_scores(obs, rects, pool)
 
     # -- internals ---------------------------------------------------------------------------
+    def _physical_term(self, obs, region):
+        """``rects -> the model's physical scores`` (zeros without one; the table is fitted
+        once per observation)."""
+        if not self.model.physical:
+            return lambda rects: np.zeros(len(rects))
+        table = table_surface(obs["depth"], obs.get("depth_valid"))
+        return lambda rects: self.model.physical_scores(obs, rects, region, table)
+
     def _threads(self) -> int:
         if self.n_threads is not None:
             return max(1, int(self.n_threads))

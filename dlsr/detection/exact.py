@@ -134,14 +134,19 @@ class ExactGridDetector(_Base):
 
     def detect(self, obs, candidates=None) -> Detection:
         t0 = time.perf_counter()
+        region = None
         if candidates is None:
-            cand, reason = self.candidates(obs)
+            cand, reason, region = self._candidates(obs)
             if reason:
                 return _empty(reason, t0)
         else:
             cand = np.asarray(candidates, dtype=float).reshape(-1, 5)
         t1 = time.perf_counter()
         scores = self.model.rectangle_scores(obs, cand, self.batch_size)
+        if self.model.physical:
+            if region is None:
+                region, _ = object_region(obs, self.background, self.region, self.min_height)
+            scores = scores + self.model.physical_scores(obs, cand, region)
         order = np.argsort(-scores, kind="stable")[: self.top_k]
         t2 = time.perf_counter()
         return Detection(cand[order], scores[order], n_candidates=len(cand),

@@ -17,7 +17,7 @@ from .model import DLSRDetector
 
 def detect_files(model, rgb, depth, mask=None, background=None, depth_units: float = 1.0,
                  detector: str | None = None, top_k: int = 5, out=None,
-                 clear_jaws: bool | None = None, **options):
+                 clear_jaws: bool | None = None, K=None, **options):
     """Detect grasps in one RGB-D image read from files (the ``graspsim detect`` command).
 
     Parameters
@@ -37,14 +37,19 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
         Multiplies the depth file's values to give metres (e.g. 0.001 for millimetres). A
         median valid depth outside 0.05 to 20 m after it is an error naming the file (wrong
         units would silently break the table fit, whose thresholds are in metres).
-    detector : {"dense", "exact"} or None
+    detector : {"dense", "exact", "lattice"} or None
         None: the model's saved choice.
     top_k : int
     out : path or None
         Overlay PNG with the detections (best drawn last).
     clear_jaws : bool or None
         Override the model's ``SearchGrid.clear_jaws`` (only candidates whose jaws come down
-        beside the object); None keeps the model's saved grid.
+        beside the object); None keeps the model's saved grid. The lattice detector's
+        candidates always span the object (False is refused).
+    K : array-like of shape (3, 3), path or None
+        The camera matrix, or a camera file (``pcdXXXXcamera.json``,
+        :func:`dlsr.datasets.read_camera_matrix`): needed by a model trained with physical
+        features (``train_detector(physical=True)``, the default of ``graspsim run``).
     **options :
         Passed to the detector (``coarse_to_fine``, ``rescore``, ``region``).
 
@@ -70,10 +75,28 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
                              "20 m); millimetres need --depth-units 0.001")
     if mask is not None:
         obs["mask"] = read_gray(mask) > 0
+    if K is not None:
+        from ..datasets import read_camera_matrix
+
+        if isinstance(K, str | Path):
+            K = read_camera_matrix(K)
+        K = np.asarray(K, dtype=float)
+        if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise ValueError(f"the camera matrix must be 3x3 with positive focal lengths, "
+                             f"got {K.tolist()}")
+        obs["K"] = K
+    elif model.physical:
+        raise ValueError("this model weighs physical features (opening in metres, heights "
+                         "above the table): give the camera intrinsics (graspsim detect "
+                         "--intrinsics FX FY CX CY, or --camera pcdXXXXcamera.json)")
     bg = None if background is None else read_rgb(background)
     search = model.detector(detector, top_k=top_k, background=bg, **options)
     if clear_jaws is not None:
-        search.grid = dataclasses.replace(search.grid, clear_jaws=bool(clear_jaws))
+        if hasattr(search, "grid"):
+            search.grid = dataclasses.replace(search.grid, clear_jaws=bool(clear_jaws))
+        elif not clear_jaws:
+            raise ValueError("the lattice detector's candidates always span the object: "
+                             "--no-clear-jaws needs the grid search (--detector dense)")
     det = search.detect(obs)
     if out is not None:
         from PIL import Image

@@ -20,6 +20,9 @@ from ..rectangles import GraspRectangle
 from .grid import SearchGrid
 
 SIZE = 24
+#: What :meth:`DLSRDetector.detector` builds: the paper's grid searched densely or exactly, or
+#: candidates fitted to the object (:class:`dlsr.detection.LatticeDetector`).
+DETECTOR_KINDS = ("dense", "exact", "lattice")
 PATCH = 6
 GRID = SIZE - PATCH + 1  # 19 patch positions per side
 SPLIT = 10  # quadrant split of the 19 x 19 code map (10 | 9)
@@ -67,6 +70,13 @@ class DLSRDetector:
     config : dict
         Training information and detector options (``detector``, ``grid``, ``top_k``,
         ``rescore``, ``region``) saved with the model.
+    physical_edges : tuple of ndarray or None
+        Bin edges of the physical features (:class:`dlsr.detection.physical.PhysicalEncoder`)
+        when the SVM was trained with them (``train_detector(physical=True)``), else None.
+    physical_coef : ndarray of shape (n_indicators,) or None
+        The SVM's weights on those indicators, feature standardisation folded in (its constant
+        is in ``intercept``): a rectangle's score is its DLSR score plus
+        :meth:`physical_scores`.
     """
 
     representation: Representation
@@ -79,6 +89,8 @@ class DLSRDetector:
     intercept: float
     preprocess: dict = field(default_factory=_default_preprocess)
     config: dict = field(default_factory=dict)
+    physical_edges: tuple | None = None
+    physical_coef: np.ndarray | None = None
 
     # -- scores ------------------------------------------------------------------------------
     @property
@@ -112,7 +124,11 @@ class DLSRDetector:
         return Z @ np.asarray(self.coef, np.float64) + float(self.intercept)
 
     def rectangle_scores(self, obs, rects, batch_size: int = 256) -> np.ndarray:
-        """Exact scores of rectangles of an observation (rectangle images, features, SVM)."""
+        """Exact scores of rectangles of an observation (rectangle images, features, SVM).
+
+        The DLSR part only: a model trained with physical features adds
+        :meth:`physical_scores` (the detectors do).
+        """
         from ..preprocess import rectangle_images
 
         rects = np.asarray(rects, dtype=float).reshape(-1, 5)
@@ -123,15 +139,60 @@ class DLSRDetector:
             out[s:s + batch_size] = self.image_scores(im, mk)
         return out
 
+    @property
+    def physical(self) -> bool:
+        """Whether the SVM weighs physical features (:mod:`dlsr.detection.physical`)."""
+        return self.physical_coef is not None
+
+    def physical_scores(self, obs, rects, region=None, table=None) -> np.ndarray:
+        """The physical term of the rectangles' scores (zeros for a model without one).
+
+        Parameters
+        ----------
+        obs : dict
+            ``depth``, ``depth_valid``, ``K`` (needed by a physical model), ``rgb`` and
+            optional ``mask``.
+        rects : ndarray of shape (n, 5)
+        region : ndarray of shape (H, W), bool, or None
+            The object region; None finds it as the detectors do by default
+            (:func:`dlsr.detection.object_region`, ``method="auto"``).
+        table : ndarray of shape (H, W) or None
+            The table surface (:func:`dlsr.detection.table_surface`); None fits it.
+
+        Returns
+        -------
+        ndarray of shape (n,), float64
+        """
+        rects = np.asarray(rects, dtype=float).reshape(-1, 5)
+        if not self.physical or len(rects) == 0:
+            return np.zeros(len(rects))
+        from .grid import object_region, table_surface
+        from .physical import PhysicalEncoder, physical_features
+
+        if obs.get("K") is None:
+            raise ValueError("this model weighs physical features (trained with "
+                             "physical=True): the observation needs its camera matrix 'K'")
+        if region is None:
+            region, _ = object_region(obs)
+        if table is None:
+            table = table_surface(obs["depth"], obs.get("depth_valid"))
+        F = physical_features(obs, rects, region, table,
+                              finger=float(self.config.get("physical_finger", 0.008)))
+        enc = PhysicalEncoder()
+        enc.edges_ = [np.asarray(e, dtype=float) for e in self.physical_edges]
+        return enc.transform(F).astype(np.float64) @ np.asarray(self.physical_coef, np.float64)
+
     # -- detectors ---------------------------------------------------------------------------
     def detector(self, kind: str | None = None, **options):
         """An :class:`~dlsr.detection.ExactGridDetector` or :class:`~dlsr.detection.DenseDetector`
         on this model.
 
-        Options default to the saved ``config`` (``grid``, ``top_k``, ``rescore``, ``region``).
+        Options default to the saved ``config`` (``grid``, ``top_k``, ``rescore``, ``region``);
+        the lattice detector ignores the grid search's (``grid``, ``coarse_to_fine``, ``rescore``).
         """
         from .dense import DenseDetector
         from .exact import ExactGridDetector
+        from .lattice import LatticeDetector
 
         kind = kind or self.config.get("detector", "dense")
         opts = {}
@@ -147,7 +208,11 @@ class DLSRDetector:
             return ExactGridDetector(self, **opts)
         if kind == "dense":
             return DenseDetector(self, **opts)
-        raise ValueError(f"unknown detector {kind!r}; choose 'dense' or 'exact'")
+        if kind == "lattice":
+            for key in ("grid", "coarse_to_fine", "rescore"):  # the grid search's options
+                opts.pop(key, None)
+            return LatticeDetector(self, **opts)
+        raise ValueError(f"unknown detector {kind!r}; choose one of {DETECTOR_KINDS}")
 
     def predict(self, obs) -> list[GraspRectangle]:
         """Rectangles best first (see :meth:`detector`)."""
@@ -176,6 +241,10 @@ class DLSRDetector:
         arrays.update(scaler_mean=np.asarray(self.scaler_mean),
                       scaler_scale=np.asarray(self.scaler_scale),
                       coef=np.asarray(self.coef), intercept=np.asarray([self.intercept]))
+        if self.physical:
+            arrays["physical_coef"] = np.asarray(self.physical_coef, dtype=np.float64)
+            for j, e in enumerate(self.physical_edges):
+                arrays[f"physical_edges_{j}"] = np.asarray(e, dtype=np.float64)
         buf = io.BytesIO()
         np.savez(buf, **{k: np.asarray(v) for k, v in arrays.items()})
         data = buf.getvalue()
@@ -192,6 +261,11 @@ class DLSRDetector:
             "preprocess": self.preprocess,
             "config": self.config,
         }
+        if self.physical:
+            from .physical import PHYSICAL_FEATURES
+
+            meta["physical"] = {"features": list(PHYSICAL_FEATURES),
+                                "n_columns": len(self.physical_edges)}
         text = json.dumps(meta, indent=2)  # before any file is touched: fails on bad config
         with atomic_write(npz, "wb") as fh:
             fh.write(data)
@@ -228,6 +302,7 @@ class DLSRDetector:
         arrays = load_npz(npz, ("scaler_mean", "scaler_scale", "coef", "intercept",
                                 "rep_dictionary"), what="model file")
         _check_arrays(arrays, bool(meta["polarity"]), npz)
+        edges, pcoef = _physical_arrays(arrays, meta, npz)
         rep = Representation.from_arrays(arrays, meta["learner"], meta.get("natural_param"),
                                          prefix="rep_")
         return cls(representation=rep, encoder=meta["encoder"],
@@ -235,7 +310,29 @@ class DLSRDetector:
                    scaler_mean=arrays["scaler_mean"], scaler_scale=arrays["scaler_scale"],
                    coef=arrays["coef"], intercept=float(arrays["intercept"][0]),
                    preprocess=dict(meta.get("preprocess") or _default_preprocess()),
-                   config=dict(meta.get("config") or {}))
+                   config=dict(meta.get("config") or {}), physical_edges=edges,
+                   physical_coef=pcoef)
+
+
+def _physical_arrays(arrays: dict, meta: dict, npz: Path):
+    """``(edges, coef)`` of a model's physical term, or ``(None, None)`` without one."""
+    phys = meta.get("physical")
+    if phys is None:
+        return None, None
+    from .physical import PHYSICAL_FEATURES
+
+    def bad(what):
+        raise CorruptFileError(f"model file {npz}: {what}")
+
+    if not isinstance(phys, dict) or phys.get("features") != list(PHYSICAL_FEATURES):
+        bad(f"physical features {phys!r} are not this dlsr's {list(PHYSICAL_FEATURES)}"[:300])
+    edges = tuple(arrays.get(f"physical_edges_{j}") for j in range(len(PHYSICAL_FEATURES)))
+    coef = arrays.get("physical_coef")
+    if coef is None or any(e is None or e.ndim != 1 for e in edges):
+        bad("a physical model needs physical_coef and one physical_edges_<j> per feature")
+    if coef.shape != (sum(len(e) + 1 for e in edges),):
+        bad(f"physical_coef has shape {coef.shape}, the bins {sum(len(e) + 1 for e in edges)}")
+    return edges, coef
 
 
 def _check_meta(meta: dict, js: Path) -> None:
@@ -268,8 +365,8 @@ def _check_meta(meta: dict, js: Path) -> None:
         return
     if not isinstance(config, dict):
         bad(f"config must be a table, got {type(config).__name__}")
-    if config.get("detector", "dense") not in ("dense", "exact"):
-        bad(f"config detector must be 'dense' or 'exact', got {config['detector']!r}")
+    if config.get("detector", "dense") not in DETECTOR_KINDS:
+        bad(f"config detector must be one of {DETECTOR_KINDS}, got {config['detector']!r}")
     if "grid" in config:
         g = config["grid"]
         try:

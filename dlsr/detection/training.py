@@ -85,11 +85,13 @@ def sample_grid_negatives(sample, n: int, rng, grid: SearchGrid = PAPER_GRID,
 
 
 def sample_observation(sample) -> dict:
-    """The observation dict a detector reads (``rgb``, ``depth``, ``depth_valid``, ``mask``
-    when the sample has one) of a :class:`dlsr.datasets.GraspSample`."""
+    """The observation dict a detector reads (``rgb``, ``depth``, ``depth_valid``, and
+    ``mask`` and ``K`` when the sample has them) of a :class:`dlsr.datasets.GraspSample`."""
     obs = {"rgb": sample.rgb, "depth": sample.depth, "depth_valid": sample.depth_valid}
     if sample.mask is not None:
         obs["mask"] = sample.mask
+    if sample.K is not None:
+        obs["K"] = sample.K
     return obs
 
 
@@ -265,6 +267,9 @@ def train_detector(
     hard_negatives: int = 0,
     hard_rounds: int = 1,
     extra_patches=None,
+    physical: bool = False,
+    physical_weight: float = 4.0,
+    physical_bins: int = 6,
     random_state=0,
     data=None,
     **config,
@@ -307,6 +312,17 @@ def train_detector(
         (:func:`dlsr.patches.load_patch_file`), joined to dictionary learning and whitening
         only (self-taught learning, the paper's Table 3); the SVM's training rectangles are
         unchanged.
+    physical : bool
+        Join the rectangles' physical features (:mod:`dlsr.detection.physical`: opening and
+        jaw size in metres, heights of the centre and of the finger footprints above the
+        table, place on the object's axes) to the DLSR features in the one SVM, as quantile-bin
+        indicators (``physical_bins`` per feature) standardised like the rest and then scaled
+        by ``physical_weight``. Needs each sample's camera matrix (``sample.K``: graspsim
+        datasets record it); the object region is the detectors' (``config["region"]``).
+        A departure from the paper, off by default (see the README for the validation that
+        chose 6 bins and weight 4).
+    physical_weight : float
+    physical_bins : int
     random_state : int
     data : RecognitionData or None
         Precomputed training rectangles of ``samples`` (skips preprocessing), e.g. from
@@ -330,6 +346,8 @@ def train_detector(
         grid = ENCODER_GRIDS[encoder]
         encoder_param = grid[len(grid) // 2 - 1]
     check_training_options(fit_grid, hard_negatives, hard_rounds)
+    if physical:
+        _check_physical_options(samples, physical_weight, physical_bins, hard_negatives)
     if isinstance(extra_patches, (str, os.PathLike)):
         from .patches import load_patch_file
 
@@ -358,10 +376,21 @@ def train_detector(
     polarity = not (learner == "NKM" and encoder == "Natural")
     F = rectangle_features(data.images, data.masks, rep, encoder, encoder_param,
                            polarity=polarity)
-    scaler = FeatureStandardizer().fit(F)
-    svm = SquaredHingeSVC(C=C).fit(scaler.transform(F), data.labels)
     labels = np.asarray(data.labels)
     n_hard = 0
+    k = F.shape[1]
+    enc = None
+    if physical:
+        from .physical import PhysicalEncoder
+
+        P = training_physical_features(samples, data, config.get("region", "auto"))
+        enc = PhysicalEncoder(int(physical_bins)).fit(P)
+        F = np.hstack([F.astype(np.float64), enc.transform(P)])
+    scaler = FeatureStandardizer().fit(F)
+    Z = scaler.transform(F)
+    if physical:
+        Z[:, k:] *= physical_weight
+    svm = SquaredHingeSVC(C=C).fit(Z, data.labels)
     if hard_negatives:
         from ..preprocess import rectangle_images
 
@@ -399,9 +428,57 @@ def train_detector(
             "n_train_rectangles": int(len(labels)),
             "n_train_positive": int(np.sum(labels == 1)),
             "train_seconds": time.perf_counter() - t0}
+    if physical:
+        info.update(physical=True, physical_weight=float(physical_weight),
+                    physical_bins=int(physical_bins))
     info.update(config)
     if isinstance(info.get("grid"), SearchGrid):
         info["grid"] = info["grid"].to_dict()
-    return DLSRDetector(rep, encoder, encoder_param, polarity, scaler.mean_, scaler.scale_,
-                        np.asarray(svm.coef_[0]), float(svm.intercept_[0]),
-                        preprocess=_default_preprocess(), config=info)
+    w = np.asarray(svm.coef_[0], dtype=np.float64)
+    mean, scale = np.asarray(scaler.mean_), np.asarray(scaler.scale_)
+    intercept = float(svm.intercept_[0])
+    edges = w_phys = None
+    if physical:  # fold the indicators' standardisation and weight into their coefficients
+        w_phys = physical_weight * w[k:] / scale[k:]
+        intercept -= float(w_phys @ mean[k:])
+        edges = tuple(enc.edges_)
+    return DLSRDetector(rep, encoder, encoder_param, polarity, mean[:k], scale[:k], w[:k],
+                        intercept, preprocess=_default_preprocess(), config=info,
+                        physical_edges=edges, physical_coef=w_phys)
+
+
+def _check_physical_options(samples, weight, bins, hard_negatives) -> None:
+    if not (np.isfinite(weight) and weight > 0):
+        raise ValueError(f"physical_weight must be a finite number > 0, got {weight}")
+    if int(bins) < 2:
+        raise ValueError(f"physical_bins must be >= 2, got {bins}")
+    if hard_negatives:
+        raise ValueError("physical features and hard-negative mining do not go together yet")
+    for s in samples:
+        if s.K is None:
+            raise ValueError(f"physical features need each image's camera matrix: image "
+                             f"{s.image_id} ({s.source}) has none (graspsim datasets record "
+                             "it in pcdXXXXcamera.json)")
+
+
+def training_physical_features(samples, data, region: str = "auto") -> np.ndarray:
+    """:func:`dlsr.detection.physical.physical_features` of every training rectangle of
+    ``data`` (a :class:`dlsr.recognition.RecognitionData` with ``rects``), measured in its
+    image of ``samples``, shape ``(len(data), 9)``."""
+    from .grid import object_region, table_surface
+    from .physical import PHYSICAL_FEATURES, physical_features
+
+    if data.rects is None:
+        raise ValueError("the training data does not record its rectangles (data.rects)")
+    by_id = {s.image_id: s for s in samples}
+    out = np.zeros((len(data), len(PHYSICAL_FEATURES)))
+    ids = np.asarray(data.image_ids)
+    for image_id in dict.fromkeys(ids.tolist()):
+        s = by_id[image_id]
+        rows = np.flatnonzero(ids == image_id)
+        obs = sample_observation(s)
+        reg, _ = object_region(obs, method=region)
+        table = table_surface(s.depth, s.depth_valid)
+        out[rows] = physical_features(obs, data.rects[rows], reg, table)
+    return out
+

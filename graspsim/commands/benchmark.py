@@ -104,7 +104,9 @@ def _register_detection(sub) -> None:
                    "--recognition, else 1)")
     d.add_argument("--recognition", default=None, metavar="JSON",
                    help="recognition.json: take the most often chosen encoder parameter and C")
-    d.add_argument("--detector", choices=["dense", "exact"], default="dense")
+    d.add_argument("--detector", choices=["dense", "exact", "lattice"], default="dense",
+                   help="dense / exact: the paper's grid search; lattice: rectangles fitted to "
+                        "the object region, every 15 deg (not in the paper)")
     d.add_argument("--coarse-to-fine", action="store_true",
                    help="dense detector: coarse grid first, then the full grid near the best")
     d.add_argument("--rescore", type=int, default=300,
@@ -129,6 +131,10 @@ def _register_detection(sub) -> None:
                         "default 0, as the paper)")
     d.add_argument("--hard-rounds", type=int, default=1, metavar="R",
                    help="rounds of hard-negative mining, each on the refitted model (default 1)")
+    d.add_argument("--physical", action="store_true",
+                   help="train the SVM with the rectangles' physical features too (opening in "
+                        "metres, heights above the table, place on the object's axes; needs "
+                        "camera matrices: graspsim datasets; not in the paper)")
     d.add_argument("--folds", type=int, default=5)
     d.add_argument("--atoms", type=int, default=300)
     d.add_argument("--patches", type=int, default=100_000)
@@ -161,7 +167,8 @@ def _detection(args: argparse.Namespace) -> int:
         n_overlays=args.overlays, save_model=args.save_model,
         extra_patches=args.extra_patches, extra_train=args.extra_train,
         extra_format=args.extra_format, extra_scale=args.extra_scale,
-        extra_mapping=args.extra_mapping, model=args.model, seed=args.seed,
+        extra_mapping=args.extra_mapping, model=args.model, physical=args.physical,
+        seed=args.seed,
         executor=executor_from_args(args),
     )
     how = ("saved model, no training" if args.model is not None

@@ -24,8 +24,15 @@ def register(subparsers) -> None:
     p.add_argument("--mask", default=None, help="object mask image (non-zero = object)")
     p.add_argument("--background", default=None,
                    help="background image: object region by background subtraction")
-    p.add_argument("--detector", choices=["dense", "exact"], default=None,
-                   help="default: the model's saved choice (dense)")
+    p.add_argument("--detector", choices=["dense", "exact", "lattice"], default=None,
+                   help="default: the model's saved choice")
+    cam = p.add_mutually_exclusive_group()
+    cam.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"),
+                     default=None, help="camera intrinsics in pixels (needed by a model "
+                     "trained with physical features, the default of graspsim run)")
+    cam.add_argument("--camera", default=None, metavar="JSON",
+                     help="camera file with the matrix K (graspsim datasets' "
+                          "pcdXXXXcamera.json)")
     p.add_argument("--coarse-to-fine", action="store_true")
     p.add_argument("--clear-jaws", action=argparse.BooleanOptionalAction, default=None,
                    help="only rectangles whose jaws come down beside the object, centred on "
@@ -40,10 +47,14 @@ def _run(args: argparse.Namespace) -> int:
     from dlsr.detection import detect_files
 
     options = {"coarse_to_fine": True} if args.coarse_to_fine else {}
+    K = args.camera
+    if args.intrinsics is not None:
+        fx, fy, cx, cy = args.intrinsics
+        K = [[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]
     det = detect_files(args.model, args.rgb, args.depth, mask=args.mask,
                        background=args.background, depth_units=args.depth_units,
                        detector=args.detector, top_k=args.top_k, out=args.out,
-                       clear_jaws=args.clear_jaws, **options)
+                       clear_jaws=args.clear_jaws, K=K, **options)
     print(json.dumps({
         "rectangles": [dict(zip(("x", "y", "theta", "w", "h"), map(float, r), strict=True))
                        for r in det.rects],

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.sim
 TINY = {
     "name": "tiny", "scenes": 6, "candidates": 12, "n_atoms": 8, "n_patches": 6000, "folds": 2,
     "inner_folds": 2, "trials": 3, "trial_candidates": 8, "baselines": ["mask-pca"],
-    "detection_images": 4, "jobs": 1, "fit_grid": 0.05, "hard_negatives": 2,
+    "detection_images": 4, "jobs": 1, "fit_grid": 0.05,
 }
 
 
@@ -32,8 +32,8 @@ def tiny_run(tmp_path_factory):
 def test_run_writes_every_stage_and_the_report(tiny_run):
     out, report = tiny_run
     stages = json.loads((out / "stages.json").read_text())
-    assert set(stages) == {"dataset", "recognition", "detection", "model", "trials/dlsr",
-                           "trials/dlsr-paper", "trials/mask-pca"}
+    assert set(stages) == {"dataset", "recognition", "detection", "model", "model-paper",
+                           "trials/dlsr", "trials/dlsr-paper", "trials/mask-pca"}
     assert stages["dataset"]["images"] == 6
     assert 0.0 <= stages["recognition"]["accuracy"] <= 1.0
     for name in ("dlsr", "dlsr-paper", "mask-pca"):
@@ -44,14 +44,18 @@ def test_run_writes_every_stage_and_the_report(tiny_run):
     assert run["config"]["scenes"] == 6 and "numpy" in run["versions"]
     # the detector training options reach the detection benchmark and the final model
     det = json.loads((out / "detection" / "detection.json").read_text())
-    assert (det["config"]["fit_grid"], det["config"]["hard_negatives"]) == (0.05, 2)
+    assert det["config"]["fit_grid"] == 0.05 and det["config"]["physical"] is True
     assert det["config"]["clear_jaws"] is True  # gripper-aware: the offline search too
+    assert det["config"]["detector"] == "lattice"
     assert det["config"]["grid_negatives"] == pipeline.RunConfig().grid_negatives
     model = json.loads((out / "model" / "dlsr.json").read_text())
-    assert (model["config"]["fit_grid"], model["config"]["hard_negatives"]) == (0.05, 2)
+    assert model["config"]["fit_grid"] == 0.05 and model["physical"]["n_columns"] == 9
+    assert model["config"]["detector"] == "lattice"
+    paper = json.loads((out / "model" / "dlsr-paper.json").read_text())
+    assert "physical" not in paper and paper["config"]["detector"] == "dense"
     md = report.read_text()
     assert "Physical grasp success" in md and "| dlsr |" in md and "| mask-pca |" in md
-    assert "| dlsr-paper |" in md and "gripper-aware search" in md
+    assert "| dlsr-paper |" in md and "gripper-aware" in md and "physical features" in md
     assert "DLSR against each baseline, scene by scene" in md and "| mask-pca | 3 |" in md
     assert (out / "pictures" / "success_rates.png").exists()
     html = (out / "report.html").read_text()
@@ -123,6 +127,14 @@ def test_config_files_and_bad_settings(tmp_path):
         pipeline.load_config(hard_negatives=-1)
     with pytest.raises(ValueError, match="fit_grid"):
         pipeline.load_config(fit_grid=0.7)
+    with pytest.raises(ValueError, match="physical features and hard_negatives"):
+        pipeline.load_config(hard_negatives=2)
+    with pytest.raises(ValueError, match="detector"):
+        pipeline.load_config(detector="grid")
+    paper = pipeline.load_config(detector="dense", physical=False, gripper_aware=False,
+                                 hard_negatives=2)
+    assert pipeline.trial_names(paper)[:2] == ["dlsr", "mask-pca"]  # no dlsr-paper twin
+    assert pipeline.trial_names(pipeline.load_config(gripper_aware=False))[1] == "dlsr-paper"
     with pytest.raises(FileNotFoundError):
         pipeline.load_config(tmp_path / "absent.toml")
     assert main(["run", "--resume", str(tmp_path / "nothing")]) == 2
@@ -221,3 +233,4 @@ def test_committed_configs_load(name):
     cfg = pipeline.load_config(path)
     assert cfg.trials == 500 and cfg.name == path.stem
     assert cfg.gripper_aware and cfg.grid_negatives == 0.0  # the defaults they build on
+    assert cfg.physical and cfg.detector == "lattice"

@@ -1,0 +1,309 @@
+"""Lattice candidates: rectangles fitted to the object, everywhere on it, every 15 degrees.
+
+The paper's search (:func:`dlsr.detection.enumerate_candidates`) lays a fixed grid of openings
+and jaw sizes over the object region, so most candidates are too narrow to span the object or
+far wider than it. :func:`lattice_candidates` instead fits each candidate to the object, as the
+Jacquard dataset's annotation does (Depierre, Dellandrea and Chen, 2018: simulated grasps tried
+all over each object): at points of a lattice over the region and every closing direction, the
+opening is the object's chord through the point (and the chord of the surface no deeper than
+the point, for rims and handles) plus a margin, within the gripper's reach. The physics labeller
+(:func:`graspsim.labelling.dense_candidates`) draws its candidates from the same lattice, on the
+simulator's object mask; :class:`LatticeDetector` draws them from the observation's object
+region and ranks them with a trained model (its DLSR score, plus its physical term when the
+model has one, :mod:`dlsr.detection.physical`).
+
+Part of :mod:`dlsr.detection`.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..rectangles import GraspRectangle
+from .exact import Detection, _check_obs, _empty
+from .grid import object_region, table_surface
+from .model import PATCHES_PER_RECTANGLE
+
+__all__ = ["LatticeDetector", "chord", "chords", "lattice_candidates", "lattice_step",
+           "max_width_px"]
+
+
+def chord(inside, centre, theta, max_px: float = 120.0) -> tuple[float, float]:
+    """Contiguous run of ``inside`` pixels through ``centre`` along ``theta``.
+
+    Returns
+    -------
+    (lo, hi) : offsets in pixels along the direction (``lo <= 0 <= hi``); ``(0, 0)`` when the
+    centre itself is outside.
+    """
+    lo, hi = chords(inside, centre, np.array([theta]), max_px)
+    return float(lo[0]), float(hi[0])
+
+
+def chords(inside, centre, thetas, max_px: float = 120.0) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`chord` for several directions at once.
+
+    Parameters
+    ----------
+    inside : ndarray of shape (H, W), bool
+    centre : ndarray of shape (2,)
+        ``(x, y)`` pixels.
+    thetas : ndarray of shape (k,)
+        Radians.
+    max_px : float
+        Longest run followed in each direction, pixels.
+
+    Returns
+    -------
+    lo, hi : ndarray of shape (k,)
+        Offsets in pixels along each direction.
+    """
+    H, W = inside.shape
+    thetas = np.asarray(thetas, dtype=float)
+    u = np.column_stack([np.cos(thetas), -np.sin(thetas)])
+    t = np.arange(0.0, max_px + 1.0)
+    ends = []
+    for sgn in (1.0, -1.0):
+        pts = np.rint(np.asarray(centre, float)[None, None, :]
+                      + sgn * t[None, :, None] * u[:, None, :]).astype(int)
+        ok = (pts[..., 0] >= 0) & (pts[..., 0] < W) & (pts[..., 1] >= 0) & (pts[..., 1] < H)
+        run = np.zeros(ok.shape, dtype=bool)
+        run[ok] = inside[pts[..., 1][ok], pts[..., 0][ok]]
+        stop = np.where(run.all(axis=1), len(t), np.argmin(run, axis=1))
+        ends.append(np.maximum(stop - 1, 0) * sgn)
+    return ends[1].astype(float), ends[0].astype(float)
+
+
+def max_width_px(z, theta, intrinsics, max_opening: float):
+    """Widest rectangle opening (pixels) the gripper can reach, from depth and intrinsics.
+
+    The inverse of :func:`graspsim.grasp.rectangle_to_grasp`'s width ``w z |(cos/fx, sin/fy)|``
+    (``w z / f`` when ``fx = fy``).
+
+    Parameters
+    ----------
+    z : float or ndarray
+        Depth of the surface under the centre, metres (> 0).
+    theta : float or ndarray
+        Closing direction, radians; broadcast with ``z``.
+    intrinsics : CameraIntrinsics or ndarray of shape (3, 3)
+    max_opening : float
+        Metres.
+
+    Returns
+    -------
+    float or ndarray
+        Pixels.
+    """
+    K = np.asarray(getattr(intrinsics, "K", intrinsics), dtype=float)
+    if K.shape != (3, 3):
+        raise ValueError(f"intrinsics must provide a 3x3 K, got shape {K.shape}")
+    scale = np.hypot(np.cos(theta) / K[0, 0], np.sin(theta) / K[1, 1])
+    return max_opening / (np.asarray(z, dtype=float) * scale)
+
+
+def lattice_step(jaw_px=(10.0, 28.0), spacing: float | None = None) -> tuple[list, float]:
+    """The two jaw sizes (a quarter of the way into ``jaw_px`` from either end) and the
+    lattice step (``spacing``, default half the smaller jaw), pixels."""
+    lo_h, hi_h = float(jaw_px[0]), float(jaw_px[1])
+    jaws = sorted({round(lo_h + 0.25 * (hi_h - lo_h), 2), round(hi_h - 0.25 * (hi_h - lo_h), 2)})
+    step = 0.5 * jaws[0] if spacing is None else float(spacing)
+    if not step > 0:
+        raise ValueError(f"spacing must be > 0, got {spacing}")
+    return jaws, step
+
+
+def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | None,
+                       jaw_px=(10.0, 28.0), spacing: float | None = None, n_angles: int = 12,
+                       margin_px: float = 4.0, depth_band: float = 0.02, reach: float = 0.95,
+                       seen: set | None = None) -> list[GraspRectangle]:
+    """Rectangles fitted to one object mask (see the module docstring).
+
+    Parameters
+    ----------
+    mask : ndarray of shape (H, W), bool
+        The object's pixels (fewer than 5: no candidate).
+    depth : ndarray of shape (H, W), float
+        Metres, 0 where missing; lattice points without depth are skipped.
+    intrinsics : CameraIntrinsics, ndarray of shape (3, 3) or None
+        Only read with ``max_opening``.
+    offset : ndarray of shape (2,)
+        Lattice offset, pixels in ``[0, spacing)``.
+    max_opening : float or None
+        The gripper's largest opening, metres; openings wider than ``reach`` x
+        :func:`max_width_px` at the depth under the centre are not generated (None: no limit).
+    jaw_px, spacing, n_angles, margin_px, depth_band, reach :
+        As :func:`graspsim.labelling.dense_candidates` documents them.
+    seen : set or None
+        Keys of candidates already generated (shared across the objects of a scene);
+        updated in place.
+
+    Returns
+    -------
+    list of GraspRectangle
+    """
+    jaws, step = lattice_step(jaw_px, spacing)
+    if n_angles < 1:
+        raise ValueError(f"n_angles must be >= 1, got {n_angles}")
+    seen = set() if seen is None else seen
+    full = np.asarray(mask, dtype=bool)
+    depth = np.asarray(depth, dtype=float)
+    out: list[GraspRectangle] = []
+    if full.sum() < 5:
+        return out
+    H, W = full.shape
+    thetas = -np.pi / 2 + np.pi * np.arange(n_angles) / n_angles
+    ys, xs = np.nonzero(full)
+    # Work in the mask's bounding box (plus a pixel): chords never leave the mask.
+    x0, y0 = max(xs.min() - 1, 0), max(ys.min() - 1, 0)
+    x1, y1 = min(xs.max() + 2, W), min(ys.max() + 2, H)
+    mask, dep = full[y0:y1, x0:x1], depth[y0:y1, x0:x1]
+    h_, w_ = mask.shape
+    gx = np.arange(xs.min() - x0 + offset[0] - step, xs.max() - x0 + 1.0, step)
+    gy = np.arange(ys.min() - y0 + offset[1] - step, ys.max() - y0 + 1.0, step)
+    px, py = np.meshgrid(gx, gy)
+    px, py = px.ravel(), py.ravel()
+    ix, iy = np.rint(px).astype(int), np.rint(py).astype(int)
+    ok = (ix >= 0) & (ix < w_) & (iy >= 0) & (iy < h_)
+    ok[ok] = mask[iy[ok], ix[ok]] & (dep[iy[ok], ix[ok]] > 0)
+    for x, y, i, j in zip(px[ok], py[ok], ix[ok], iy[ok], strict=True):
+        pt = np.array([x, y])
+        zc = dep[j, i]
+        near = mask & (dep > 0) & (dep < zc + depth_band)
+        runs_mask = np.column_stack(chords(mask, pt, thetas))
+        runs_near = np.column_stack(chords(near, pt, thetas))
+        for k, th in enumerate(thetas):
+            u = np.array([np.cos(th), -np.sin(th)])
+            runs = {tuple(runs_mask[k]), tuple(runs_near[k])}
+            for lo, hi in sorted(runs):
+                length = hi - lo
+                c = pt + 0.5 * (lo + hi) * u
+                ci = int(np.clip(np.rint(c[0]), 0, w_ - 1))
+                cj = int(np.clip(np.rint(c[1]), 0, h_ - 1))
+                z = dep[cj, ci] if dep[cj, ci] > 0 else zc
+                c = c + (x0, y0)
+                w_max = (np.inf if max_opening is None else
+                             reach * float(max_width_px(z, th, intrinsics, max_opening)))
+                for w in (length + margin_px, 1.3 * length + 2 * margin_px):
+                    if w > w_max:
+                        continue
+                    for h in jaws:
+                        key = (round(c[0]), round(c[1]), k, round(w / 2), h)
+                        if key in seen:
+                            continue
+                        seen.add(key)
+                        out.append(GraspRectangle(float(c[0]), float(c[1]), float(th),
+                                                  float(w), float(h)))
+    return out
+
+
+class LatticeDetector:
+    """Rank rectangles fitted to the object (:func:`lattice_candidates`) with a trained model.
+
+    The candidates are the physics labeller's, drawn from the observation instead of the
+    simulator: the object region (:func:`dlsr.detection.object_region`), the observed depth
+    (missing pixels skipped) and the camera matrix. At most ``budget`` of them (a random
+    subset, ``seed``) are scored exactly (recognition's rectangle images and the model's SVM,
+    :meth:`dlsr.detection.DenseDetector.exact_scores`) plus the model's physical term when it
+    has one (:meth:`dlsr.detection.DLSRDetector.physical_scores`). A departure from the
+    paper's grid search (:class:`dlsr.detection.DenseDetector`), chosen on validation scenes
+    of the training objects (README).
+
+    Parameters
+    ----------
+    model : DLSRDetector
+    top_k : int
+        Rectangles returned.
+    region, background, min_height :
+        See :class:`~dlsr.detection.ExactGridDetector`.
+    budget : int or None
+        Candidates scored at most (None: all).
+    max_width : float or None
+        The gripper's largest opening, metres; wider openings are not generated (None: any;
+        then the observation needs no camera matrix unless the model is physical).
+    jaw_px, spacing, n_angles, margin_px, depth_band, reach :
+        See :func:`lattice_candidates`.
+    seed : int
+        Lattice offset and budget subset.
+    n_threads : int or None
+        Threads of the exact scoring (None: the CPUs available).
+    """
+
+    def __init__(self, model, top_k: int = 5, region: str = "auto", background=None,
+                 min_height: float = 0.006, budget: int | None = 192,
+                 max_width: float | None = None, jaw_px=(10.0, 28.0),
+                 spacing: float | None = None, n_angles: int = 12, margin_px: float = 4.0,
+                 depth_band: float = 0.02, reach: float = 0.95, seed: int = 0,
+                 n_threads: int | None = None):
+        self.model = model
+        self.top_k = top_k
+        self.region = region
+        self.background = background
+        self.min_height = min_height
+        self.budget = budget
+        self.max_width = max_width
+        self.jaw_px = jaw_px
+        self.spacing = spacing
+        self.n_angles = n_angles
+        self.margin_px = margin_px
+        self.depth_band = depth_band
+        self.reach = reach
+        self.seed = seed
+        self.n_threads = n_threads
+
+    def candidates(self, obs):
+        """``(candidates (n, 5), reason or None, object region or None)``: the lattice of an
+        observation within the budget."""
+        _check_obs(obs)
+        if obs.get("K") is None and (self.max_width is not None or self.model.physical):
+            raise ValueError("lattice candidates within the gripper's reach (max_width) and "
+                             "a model with physical features need the observation's camera "
+                             "matrix 'K'")
+        if self.budget is not None and int(self.budget) < 1:
+            raise ValueError(f"budget must be >= 1 or None, got {self.budget}")
+        depth = np.asarray(obs["depth"], dtype=float)
+        valid = np.isfinite(depth) & (depth > 0)
+        if obs.get("depth_valid") is not None:
+            valid &= np.asarray(obs["depth_valid"], dtype=bool)
+        if not valid.any():
+            return np.zeros((0, 5)), "the depth image has no valid pixel (all masked)", None
+        region, how = object_region(obs, self.background, self.region, self.min_height)
+        if not region.any():
+            return np.zeros((0, 5)), f"empty object region (method {how})", region
+        rng = np.random.default_rng(self.seed)
+        _, step = lattice_step(self.jaw_px, self.spacing)
+        offset = rng.uniform(0.0, step, size=2)
+        rects = lattice_candidates(region, np.where(valid, depth, 0.0), obs.get("K"), offset,
+                                   self.max_width, self.jaw_px, self.spacing, self.n_angles,
+                                   self.margin_px, self.depth_band, self.reach)
+        cand = np.array([r.as_array() for r in rects], dtype=float).reshape(-1, 5)
+        if self.budget is not None and len(cand) > self.budget:
+            cand = cand[np.sort(rng.choice(len(cand), size=int(self.budget), replace=False))]
+        if not len(cand):
+            return cand, f"no rectangle fits the object region (method {how})", region
+        return cand, None, region
+
+    def detect(self, obs) -> Detection:
+        """Detect grasps in one observation (``timings``: ``candidates``, ``score``)."""
+        from .dense import DenseDetector
+
+        t0 = time.perf_counter()
+        cand, reason, region = self.candidates(obs)
+        if reason:
+            return _empty(reason, t0)
+        t1 = time.perf_counter()
+        exact = DenseDetector(self.model, n_threads=self.n_threads).exact_scores(obs, cand)
+        table = (table_surface(obs["depth"], obs.get("depth_valid"))
+                 if self.model.physical else None)
+        scores = exact + self.model.physical_scores(obs, cand, region, table)
+        order = np.argsort(-scores, kind="stable")[: self.top_k]
+        t2 = time.perf_counter()
+        return Detection(cand[order], scores[order], n_candidates=len(cand),
+                         n_encodings=len(cand) * PATCHES_PER_RECTANGLE, seconds=t2 - t0,
+                         timings={"candidates": t1 - t0, "score": t2 - t1})
+
+    def predict(self, obs) -> list[GraspRectangle]:
+        """The top-k rectangles, best first (empty, with a logged reason, when none)."""
+        return self.detect(obs).rectangles()

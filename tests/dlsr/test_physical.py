@@ -1,0 +1,238 @@
+"""Physical features, the lattice detector and models that weigh both."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dlsr.datasets import GraspSample
+from dlsr.detection import (
+    PHYSICAL_FEATURES,
+    DLSRDetector,
+    LatticeDetector,
+    PhysicalEncoder,
+    lattice_candidates,
+    object_region,
+    physical_features,
+    table_surface,
+    train_detector,
+)
+from dlsr.rectangles import GraspRectangle
+
+H, W = 120, 160
+F = 200.0
+K = np.array([[F, 0.0, W / 2], [0.0, F, H / 2], [0.0, 0.0, 1.0]])
+COL = {name: j for j, name in enumerate(PHYSICAL_FEATURES)}
+
+
+def _scene(seed=0):
+    """A flat table 0.8 m away with a 3 cm high bar (long axis along x, 16 px wide)."""
+    rng = np.random.default_rng(seed)
+    rgb = (90 + 100 * rng.random((H, W, 3))).astype(np.uint8)
+    depth = np.full((H, W), 0.8, np.float32)
+    mask = np.zeros((H, W), bool)
+    mask[52:68, 40:120] = True
+    depth[mask] -= 0.03
+    rgb[mask] = (200, 30, 30)
+    return {"rgb": rgb, "depth": depth, "depth_valid": np.ones((H, W), bool), "K": K.copy(),
+            "mask": mask}
+
+
+def _features(obs, rects):
+    region = np.asarray(obs["mask"], bool)
+    return physical_features(obs, np.asarray(rects, float), region,
+                             table_surface(obs["depth"], obs["depth_valid"]))
+
+
+def test_physical_features_tell_a_grasp_across_the_bar_from_one_along_it():
+    obs = _scene()
+    across = (80.0, 60.0, np.pi / 2, 30.0, 12.0)  # closing along y, over the 16 px width
+    along = (80.0, 60.0, 0.0, 30.0, 12.0)  # closing along x: both fingers land on the bar
+    P = _features(obs, [across, along])
+    assert P.shape == (2, len(PHYSICAL_FEATURES))
+    z = 0.77  # the bar's top under the centre
+    assert P[0, COL["opening_m"]] == pytest.approx(30 * z / F, rel=1e-6)
+    assert P[0, COL["jaw_m"]] == pytest.approx(12 * z / F, rel=1e-6)
+    assert P[:, COL["centre_height_m"]] == pytest.approx([0.03, 0.03], abs=1e-3)
+    assert P[0, COL["jaw_height_m"]] == pytest.approx(0.0, abs=1e-3)
+    assert P[1, COL["jaw_height_m"]] == pytest.approx(0.03, abs=1e-3)
+    assert P[0, COL["jaw_on_object"]] == 0.0 and P[1, COL["jaw_on_object"]] == 1.0
+    assert P[0, COL["jaw_above_centre_m"]] < -0.02 < P[1, COL["jaw_above_centre_m"]]
+    assert (P[:, COL["centre_on_object"]] == 1).all()
+    assert P[0, COL["angle_to_minor"]] == pytest.approx(0.0, abs=1e-6)
+    assert P[1, COL["angle_to_minor"]] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_offset_along_the_major_axis_runs_from_the_centroid_to_the_end():
+    obs = _scene()
+    rects = [(79.5, 59.5, np.pi / 2, 30, 12), (119.0, 59.5, np.pi / 2, 30, 12),
+             (20.0, 20.0, np.pi / 2, 30, 12)]
+    P = _features(obs, rects)
+    assert P[0, COL["offset_major"]] == pytest.approx(0.0, abs=1e-6)
+    assert P[1, COL["offset_major"]] == pytest.approx(1.0, abs=1e-6)
+    assert P[2, COL["centre_on_object"]] == 0 and P[2, COL["centre_height_m"]] == pytest.approx(
+        0.0, abs=1e-3)
+
+
+def test_missing_depth_and_empty_region_give_defined_values():
+    obs = _scene()
+    obs["depth_valid"] = obs["depth_valid"].copy()
+    obs["depth_valid"][55:65, 75:85] = False  # a hole under the centre
+    P = _features(obs, [(80.0, 60.0, np.pi / 2, 30.0, 12.0)])
+    assert np.isfinite(P).all()
+    assert P[0, COL["centre_height_m"]] == pytest.approx(0.03, abs=1e-3)  # the region's median
+    empty = physical_features(obs, np.array([[80.0, 60.0, 0.0, 30.0, 12.0]]),
+                              np.zeros((H, W), bool), None)
+    assert empty[0, COL["offset_major"]] == 1 and empty[0, COL["angle_to_minor"]] == 1
+    assert empty[0, COL["centre_on_object"]] == 0
+    assert physical_features(obs, np.zeros((0, 5)), obs["mask"]).shape == (0, 9)
+    with pytest.raises(ValueError, match="region"):
+        physical_features(obs, np.zeros((1, 5)), np.zeros((3, 3), bool))
+    with pytest.raises(ValueError, match="K"):
+        physical_features({k: v for k, v in obs.items() if k != "K"},
+                          np.array([[80.0, 60.0, 0.0, 30.0, 12.0]]), obs["mask"])
+
+
+def test_physical_encoder_gives_one_indicator_per_column():
+    rng = np.random.default_rng(0)
+    X = np.column_stack([rng.normal(size=200), rng.integers(0, 2, 200), np.zeros(200)])
+    enc = PhysicalEncoder(n_bins=4).fit(X)
+    assert [len(e) for e in enc.edges_] == [3, 1, 0]  # ties merge bins; no empty bin
+    E = enc.transform(X)
+    assert E.shape == (200, enc.n_output) == (200, 4 + 2 + 1)
+    starts = np.cumsum([0, 4, 2])
+    for s, n in zip(starts, (4, 2, 1), strict=True):
+        assert (E[:, s:s + n].sum(axis=1) == 1).all()
+    assert np.array_equal(E[:, 0:4].sum(axis=0) > 30, np.ones(4, bool))  # quantile bins
+    assert np.array_equal(X, np.column_stack([X[:, 0], X[:, 1], X[:, 2]]))  # input untouched
+    with pytest.raises(ValueError, match="non-finite"):
+        PhysicalEncoder().fit(np.array([[np.nan], [1.0]]))
+    with pytest.raises(ValueError, match="n_bins"):
+        PhysicalEncoder(n_bins=1).fit(X)
+    with pytest.raises(ValueError, match="shape"):
+        enc.transform(X[:, :2])
+
+
+def test_lattice_candidates_fit_the_object_and_the_reach():
+    obs = _scene()
+    rects = lattice_candidates(obs["mask"], obs["depth"], K, np.zeros(2), max_opening=None)
+    A = np.array([r.as_array() for r in rects])
+    assert len(A) > 100
+    across = np.isclose(np.abs(np.sin(A[:, 2])), 1.0)
+    # closing across the bar: the chord is the bar's width (16 px, 15 between end pixels)
+    assert np.isclose(A[across, 3].min(), 15 + 4.0)
+    narrow = lattice_candidates(obs["mask"], obs["depth"], K, np.zeros(2), max_opening=0.05)
+    widths_m = np.array([r.w for r in narrow]) * 0.77 / F
+    assert len(narrow) < len(rects) and (widths_m <= 0.95 * 0.05 + 1e-9).all()
+    assert lattice_candidates(np.zeros((H, W), bool), obs["depth"], K, np.zeros(2), None) == []
+
+
+def _samples(n=3, with_K=True):
+    out = []
+    for seed in range(n):
+        obs = _scene(seed)
+        pos = [GraspRectangle(x, 60.0, np.pi / 2, 22.0, 12.0) for x in range(50, 112, 8)]
+        neg = [GraspRectangle(x, 60.0, 0.0, 30.0, 12.0) for x in range(50, 112, 8)]
+        neg += [GraspRectangle(x, 60.0, np.pi / 2, 12.0, 12.0) for x in range(50, 112, 16)]
+        out.append(GraspSample(str(seed), "bar", obs["rgb"], obs["depth"], obs["depth_valid"],
+                               pos, neg, mask=obs["mask"], K=K.copy() if with_K else None))
+    return out
+
+
+@pytest.fixture(scope="module")
+def physical_model():
+    return train_detector(_samples(), "NKM", "Natural", n_atoms=16, n_patches=3000,
+                          random_state=0, grid_negatives=0.0, physical=True,
+                          detector="lattice")
+
+
+def test_a_physical_model_prefers_grasps_across_the_bar_and_round_trips(physical_model,
+                                                                         tmp_path):
+    model = physical_model
+    assert model.physical and model.config["physical"] is True
+    obs = _scene(seed=5)
+    det = model.detector(top_k=3)
+    assert isinstance(det, LatticeDetector)
+    d = det.detect(obs)
+    assert len(d.rects) == 3
+    assert abs(np.sin(d.rects[0, 2])) > 0.85  # closing across the bar (within 31.8 deg)
+    model.save(tmp_path / "m")
+    loaded = DLSRDetector.load(tmp_path / "m")
+    assert loaded.physical
+    rects = d.rects
+    np.testing.assert_allclose(loaded.physical_scores(obs, rects),
+                               model.physical_scores(obs, rects), rtol=1e-12)
+    np.testing.assert_array_equal(loaded.detector(top_k=3).detect(obs).rects, d.rects)
+    # the grid search adds the same physical term
+    assert model.detector("dense", top_k=1).detect(obs).rects.shape == (1, 5)
+
+
+def test_physical_term_separates_reachable_from_blocked_jaws(physical_model):
+    obs = _scene(seed=6)
+    good = (80.0, 60.0, np.pi / 2, 22.0, 12.0)
+    blocked = (80.0, 60.0, 0.0, 30.0, 12.0)
+    s = physical_model.physical_scores(obs, np.array([good, blocked]))
+    assert s[0] > s[1]
+
+
+def test_physical_training_and_scoring_need_the_camera_matrix(physical_model):
+    with pytest.raises(ValueError, match="image 0 .*camera matrix|camera matrix.*image 0"):
+        train_detector(_samples(with_K=False), "NKM", "Natural", n_atoms=16, n_patches=3000,
+                       grid_negatives=0.0, physical=True)
+    with pytest.raises(ValueError, match="physical_weight"):
+        train_detector(_samples(), "NKM", "Natural", n_atoms=16, n_patches=3000,
+                       grid_negatives=0.0, physical=True, physical_weight=0.0)
+    obs = {k: v for k, v in _scene().items() if k != "K"}
+    with pytest.raises(ValueError, match="'K'"):
+        physical_model.physical_scores(obs, np.array([[80.0, 60.0, 0.0, 30.0, 12.0]]))
+    with pytest.raises(ValueError, match="'K'"):
+        physical_model.detector("lattice").detect(obs)
+
+
+def test_lattice_detector_reports_empty_observations(physical_model, caplog):
+    obs = _scene()
+    obs["depth_valid"] = np.zeros((H, W), bool)
+    d = physical_model.detector("lattice").detect(obs)
+    assert len(d.rects) == 0 and "no valid pixel" in d.reason
+    obs = _scene()
+    obs["mask"] = np.zeros((H, W), bool)
+    d = physical_model.detector("lattice").detect(obs)
+    assert len(d.rects) == 0 and "empty object region" in d.reason
+    with pytest.raises(ValueError, match="budget"):
+        physical_model.detector("lattice", budget=0).detect(_scene())
+
+
+def test_a_model_without_physical_features_scores_as_before():
+    samples = _samples()
+    model = train_detector(samples, "NKM", "Natural", n_atoms=16, n_patches=3000,
+                           random_state=0, grid_negatives=0.0)
+    assert not model.physical
+    obs = _scene(seed=5)
+    rects = np.array([[80.0, 60.0, np.pi / 2, 22.0, 12.0]])
+    assert (model.physical_scores(obs, rects) == 0).all()
+    region, _ = object_region(obs)
+    assert region.any()
+
+
+def test_detect_files_passes_the_camera_to_a_physical_model(physical_model, tmp_path):
+    import json
+
+    from PIL import Image
+
+    from dlsr.detection import detect_files
+
+    obs = _scene(seed=8)
+    Image.fromarray(obs["rgb"]).save(tmp_path / "r.png")
+    np.save(tmp_path / "d.npy", obs["depth"])
+    (tmp_path / "camera.json").write_text(json.dumps({"K": K.tolist()}))
+    args = (physical_model, tmp_path / "r.png", tmp_path / "d.npy")
+    with pytest.raises(ValueError, match="--intrinsics"):
+        detect_files(*args)
+    by_file = detect_files(*args, K=tmp_path / "camera.json", top_k=2)
+    by_matrix = detect_files(*args, K=K, top_k=2)
+    assert len(by_file.rects) == 2
+    np.testing.assert_array_equal(by_file.rects, by_matrix.rects)
+    with pytest.raises(ValueError, match="3x3"):
+        detect_files(*args, K=np.eye(2))
+    with pytest.raises(ValueError, match="span the object"):
+        detect_files(*args, K=K, clear_jaws=False)
