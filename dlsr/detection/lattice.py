@@ -199,17 +199,30 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
     return out
 
 
+def _fill_region_holes(depth, valid, region):
+    """``depth`` with the region's missing pixels set to the nearest valid depth."""
+    from scipy.ndimage import distance_transform_edt
+
+    holes = region & ~valid
+    if not holes.any() or not valid.any():
+        return depth
+    _, (iy, ix) = distance_transform_edt(~valid, return_indices=True)
+    out = depth.copy()
+    out[holes] = depth[iy[holes], ix[holes]]
+    return out
+
+
 class LatticeDetector:
     """Rank rectangles fitted to the object (:func:`lattice_candidates`) with a trained model.
 
     The candidates are the physics labeller's, drawn from the observation instead of the
     simulator: the object region (:func:`dlsr.detection.object_region`), the observed depth
-    (missing pixels skipped) and the camera matrix. At most ``budget`` of them (a random
-    subset, ``seed``) are scored exactly (recognition's rectangle images and the model's SVM,
-    :meth:`dlsr.detection.DenseDetector.exact_scores`) plus the model's physical term when it
-    has one (:meth:`dlsr.detection.DLSRDetector.physical_scores`). A departure from the
-    paper's grid search (:class:`dlsr.detection.DenseDetector`), chosen on validation scenes
-    of the training objects (README).
+    (holes in the region filled, ``fill_holes``) and the camera matrix. At most ``budget`` of
+    them (a random subset, ``seed``) are scored exactly (recognition's rectangle images and the
+    model's SVM, :meth:`dlsr.detection.DenseDetector.exact_scores`) plus the model's physical
+    term when it has one (:meth:`dlsr.detection.DLSRDetector.physical_scores`). A departure
+    from the paper's grid search (:class:`dlsr.detection.DenseDetector`), chosen on validation
+    scenes of the training objects (README).
 
     Parameters
     ----------
@@ -227,6 +240,12 @@ class LatticeDetector:
         See :func:`lattice_candidates`.
     seed : int
         Lattice offset and budget subset.
+    fill_holes : bool
+        Give the region's pixels without depth the nearest valid depth before the lattice is
+        laid (otherwise lattice points on holes are skipped and the depth band of rims and
+        handles breaks at them); scoring still sees the observed depth. On validation scenes
+        of the training objects: 72 against 68 successes of 100 (5 against 1 scenes won alone,
+        not separated).
     n_threads : int or None
         Threads of the exact scoring (None: the CPUs available).
     """
@@ -236,7 +255,7 @@ class LatticeDetector:
                  max_width: float | None = None, jaw_px=(10.0, 28.0),
                  spacing: float | None = None, n_angles: int = 12, margin_px: float = 4.0,
                  depth_band: float = 0.02, reach: float = 0.95, seed: int = 0,
-                 n_threads: int | None = None):
+                 fill_holes: bool = True, n_threads: int | None = None):
         self.model = model
         self.top_k = top_k
         self.region = region
@@ -251,6 +270,7 @@ class LatticeDetector:
         self.depth_band = depth_band
         self.reach = reach
         self.seed = seed
+        self.fill_holes = fill_holes
         self.n_threads = n_threads
 
     def candidates(self, obs):
@@ -275,7 +295,10 @@ class LatticeDetector:
         rng = np.random.default_rng(self.seed)
         _, step = lattice_step(self.jaw_px, self.spacing)
         offset = rng.uniform(0.0, step, size=2)
-        rects = lattice_candidates(region, np.where(valid, depth, 0.0), obs.get("K"), offset,
+        dep = np.where(valid, depth, 0.0)
+        if self.fill_holes:
+            dep = _fill_region_holes(dep, valid, region)
+        rects = lattice_candidates(region, dep, obs.get("K"), offset,
                                    self.max_width, self.jaw_px, self.spacing, self.n_angles,
                                    self.margin_px, self.depth_band, self.reach)
         cand = np.array([r.as_array() for r in rects], dtype=float).reshape(-1, 5)

@@ -236,3 +236,17 @@ def test_detect_files_passes_the_camera_to_a_physical_model(physical_model, tmp_
         detect_files(*args, K=np.eye(2))
     with pytest.raises(ValueError, match="span the object"):
         detect_files(*args, K=K, clear_jaws=False)
+
+
+def test_lattice_fills_depth_holes_in_the_region_before_laying_the_lattice(physical_model):
+    obs = _scene()
+    obs["depth_valid"] = obs["depth_valid"].copy()
+    obs["depth_valid"][52:68, 60:100] = False  # the middle of the bar unseen
+    obs["depth"] = np.where(obs["depth_valid"], obs["depth"], 0.0).astype(np.float32)
+    det = physical_model.detector("lattice", budget=None)
+    filled, _, _ = det.candidates(obs)
+    det.fill_holes = False
+    holey, _, _ = det.candidates(obs)
+    inside = lambda c: ((c[:, 0] > 62) & (c[:, 0] < 98)).sum()  # noqa: E731
+    assert inside(holey) < inside(filled)  # lattice points on the hole come back
+    assert np.array_equal(obs["depth"][60, 80], np.float32(0.0))  # the input is untouched
