@@ -25,7 +25,8 @@ def register(subparsers) -> None:
                    help="keep only the detector's rectangles this gripper can execute, judged "
                         "from the depth image (opening within reach, fingers not landing on a "
                         "seen surface); a DLSR model also searches only rectangles whose jaws "
-                        "come down beside the object (not in the paper)")
+                        "come down beside the object (its grid) or openings within reach (its "
+                        "lattice), and ranks its best 40 (not in the paper)")
     p.add_argument("--objects", default="test", choices=["train", "test", "all"])
     p.add_argument("--n", type=int, default=200,
                    help="number of trials (with --declutter: of rounds)")
