@@ -408,12 +408,22 @@ def read_camera_matrix(path) -> np.ndarray:
 
     path = Path(path)
     try:
-        K = np.asarray(json.loads(path.read_text())["K"], dtype=float)
+        K = json.loads(path.read_text())["K"]
     except (ValueError, KeyError, TypeError) as e:
         raise ValueError(f"camera file {path}: no readable 'K' ({e})") from e
+    return check_camera_matrix(K, f"camera file {path}: 'K'")
+
+
+def check_camera_matrix(K, what: str = "the camera matrix 'K'") -> np.ndarray:
+    """``K`` as a float (3, 3) array, or a ValueError naming ``what`` unless it is a 3x3
+    camera matrix of finite values with positive focal lengths."""
+    try:
+        K = np.asarray(K, dtype=float)
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"{what} must be a 3x3 camera matrix, got {K!r}"[:300]) from e
     if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ValueError(f"camera file {path}: 'K' must be a 3x3 matrix with positive focal "
-                         f"lengths, got {K.tolist()}")
+        raise ValueError(f"{what} must be a 3x3 camera matrix with positive focal lengths, "
+                         f"got {K.tolist()}")
     return K
 
 

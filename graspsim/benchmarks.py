@@ -265,8 +265,6 @@ def detection_benchmark(
 
     if detector not in DETECTOR_KINDS:
         raise ValueError(f"detector must be one of {DETECTOR_KINDS}, got {detector!r}")
-    if physical and hard_negatives:
-        raise ValueError("physical features and hard_negatives do not go together yet")
     if model is not None:
         refused = [name for name, value, default in (
             ("extra_patches", extra_patches, None), ("extra_train", extra_train, None),
@@ -290,7 +288,7 @@ def detection_benchmark(
         raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
     if encoder not in ENCODERS:
         raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
-    check_training_options(fit_grid, hard_negatives, hard_rounds)
+    check_training_options(fit_grid, hard_negatives, hard_rounds, physical)
     extra = None
     if extra_patches is not None:
         from dlsr.patches import load_patch_file

@@ -149,14 +149,13 @@ class RunConfig:
 
         if self.detector not in DETECTOR_KINDS:
             raise ValueError(f"detector must be one of {DETECTOR_KINDS}, got {self.detector!r}")
-        if self.physical and self.hard_negatives:
-            raise ValueError("physical features and hard_negatives do not go together yet")
         if not self.grid_negatives >= 0:
             raise ValueError(f"grid_negatives must be >= 0, got {self.grid_negatives}")
         for name in ("scenes", "candidates", "n_atoms", "n_patches", "folds", "trials"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        check_training_options(self.fit_grid, self.hard_negatives, self.hard_rounds)
+        check_training_options(self.fit_grid, self.hard_negatives, self.hard_rounds,
+                               self.physical)
         from .labelling import check_sampler
 
         check_sampler(self.label_sampler)
@@ -413,15 +412,16 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
     model_path = root / "model" / "dlsr"
     from dlsr.detection import train_detector
 
-    for key, path, physical in (("model", model_path, config.physical),
-                                ("model-paper", _paper_model_path(root, config), False)):
-        if path == model_path and key != "model" or stages.done(key):
+    models = [("model", model_path, config.physical, config.detector)]
+    if config.physical:
+        models.append(("model-paper", _paper_model_path(model_path, config), False, "dense"))
+    for key, path, physical, kind in models:
+        if stages.done(key):
             continue
         t0 = time.perf_counter()
         model = train_detector(samples, learner=config.learner, encoder=config.encoder,
                                C=config.C, n_atoms=config.n_atoms, n_patches=config.n_patches,
-                               random_state=seeds["model"],
-                               detector=config.detector if key == "model" else "dense",
+                               random_state=seeds["model"], detector=kind,
                                fit_grid=config.fit_grid, hard_negatives=config.hard_negatives,
                                hard_rounds=config.hard_rounds,
                                grid_negatives=config.grid_negatives, physical=physical)
@@ -485,10 +485,10 @@ def trial_names(config: RunConfig) -> list[str]:
             *config.baselines]
 
 
-def _paper_model_path(root: Path, config: RunConfig) -> Path:
-    """The model of the ``dlsr-paper`` trials: its own when DLSR's is trained with physical
-    features, else DLSR's."""
-    return root / "model" / ("dlsr-paper" if config.physical else "dlsr")
+def _paper_model_path(model_path: Path, config: RunConfig) -> Path:
+    """The model of the ``dlsr-paper`` trials beside DLSR's ``model_path``: its own when DLSR's
+    is trained with physical features, else DLSR's."""
+    return model_path.with_name("dlsr-paper") if config.physical else model_path
 
 
 def _trial_detector(name: str, model_path: Path, config: RunConfig):
@@ -497,7 +497,7 @@ def _trial_detector(name: str, model_path: Path, config: RunConfig):
 
         kind = config.detector if name == "dlsr" else "dense"
         if name == "dlsr-paper":
-            model_path = _paper_model_path(model_path.parent.parent, config)
+            model_path = _paper_model_path(model_path, config)
         options = {}
         if kind == "dense":
             options = {"coarse_to_fine": config.coarse_to_fine, "rescore": config.rescore}

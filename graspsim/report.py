@@ -460,7 +460,9 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
                    + ("" if lattice else " and jaws beside the object")
                    + ", and of its best 40 the first whose fingers land on no surface seen in "
                      "the depth image")
-    if config.gripper_aware or lattice or config.physical:
+    from .pipeline import departs_from_paper
+
+    if departs_from_paper(config):
         search += ("; `dlsr-paper` is the paper's configuration on the same images (the "
                    "paper's training and grid search)")
     blocks.append(("p", f"DLSR: {training}; {search}. Labels: {config.label_sampler} "

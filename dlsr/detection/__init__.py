@@ -141,6 +141,7 @@ from .grid import (  # noqa: F401
     opening_widths,
     table_plane_mask,
     table_surface,
+    valid_depth,
     within_reach,
 )
 from .lattice import LatticeDetector, lattice_candidates, max_width_px

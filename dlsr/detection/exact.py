@@ -13,7 +13,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..rectangles import GraspRectangle, array_to_rects
-from .grid import PAPER_GRID, SearchGrid, enumerate_candidates, object_region, within_reach
+from .grid import (
+    PAPER_GRID,
+    SearchGrid,
+    enumerate_candidates,
+    object_region,
+    valid_depth,
+    within_reach,
+)
 from .model import PATCHES_PER_RECTANGLE, DLSRDetector
 
 log = logging.getLogger(__name__)
@@ -66,6 +73,18 @@ def _check_obs(obs):
         raise ValueError(f"observation rgb {rgb.shape} and depth {depth.shape} do not match")
 
 
+def _observed_region(obs, background, method: str, min_height: float):
+    """``(valid depth, object region, how it was found, reason or None)`` of an observation;
+    the reason says why no candidate can be laid (no valid depth, empty region)."""
+    valid = valid_depth(obs["depth"], obs.get("depth_valid"))
+    if not valid.any():
+        return valid, None, None, "the depth image has no valid pixel (all masked)"
+    region, how = object_region(obs, background, method, min_height)
+    if not region.any():
+        return valid, region, how, f"empty object region (method {how})"
+    return valid, region, how, None
+
+
 class _Base:
     def __init__(self, model: DLSRDetector, grid: SearchGrid = PAPER_GRID, top_k: int = 5,
                  region: str = "auto", background=None, min_height: float = 0.006):
@@ -84,15 +103,10 @@ class _Base:
     def _candidates(self, obs, grid: SearchGrid | None = None):
         """``(candidates, reason or None, object region or None)``."""
         _check_obs(obs)
-        depth = np.asarray(obs["depth"])
-        valid = np.isfinite(depth) & (depth > 0)
-        if obs.get("depth_valid") is not None:
-            valid &= np.asarray(obs["depth_valid"], dtype=bool)
-        if not valid.any():
-            return np.zeros((0, 5)), "the depth image has no valid pixel (all masked)", None
-        region, how = object_region(obs, self.background, self.region, self.min_height)
-        if not region.any():
-            return np.zeros((0, 5)), f"empty object region (method {how})", region
+        _, region, how, reason = _observed_region(obs, self.background, self.region,
+                                                  self.min_height)
+        if reason:
+            return np.zeros((0, 5)), reason, region
         grid = grid or self.grid
         cand = enumerate_candidates(region, grid)
         cand = within_reach(obs, cand, region, grid)

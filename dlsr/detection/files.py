@@ -76,15 +76,10 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
     if mask is not None:
         obs["mask"] = read_gray(mask) > 0
     if K is not None:
-        from ..datasets import read_camera_matrix
+        from ..datasets import check_camera_matrix, read_camera_matrix
 
-        if isinstance(K, str | Path):
-            K = read_camera_matrix(K)
-        K = np.asarray(K, dtype=float)
-        if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
-            raise ValueError(f"the camera matrix must be 3x3 with positive focal lengths, "
-                             f"got {K.tolist()}")
-        obs["K"] = K
+        obs["K"] = (read_camera_matrix(K) if isinstance(K, str | Path)
+                    else check_camera_matrix(K))
     elif model.physical:
         raise ValueError("this model weighs physical features (opening in metres, heights "
                          "above the table): give the camera intrinsics (graspsim detect "

@@ -133,6 +133,15 @@ def _fill_holes(mask: np.ndarray) -> np.ndarray:
     return mask | inner[labels]
 
 
+def valid_depth(depth, depth_valid=None) -> np.ndarray:
+    """Pixels with a usable depth: finite, > 0 and (when given) marked valid, ``(H, W)`` bool."""
+    depth = np.asarray(depth)
+    valid = np.isfinite(depth) & (depth > 0)
+    if depth_valid is not None:
+        valid &= np.asarray(depth_valid, dtype=bool)
+    return valid
+
+
 def _poly_terms(x, y, degree: int) -> np.ndarray:
     """Monomials ``x**i * y**j`` with ``i + j <= degree``, shape ``(len(x), n_terms)``."""
     return np.column_stack([x ** i * y ** j for i in range(degree + 1)
@@ -246,9 +255,7 @@ def table_surface(depth, depth_valid=None, stride: int = 4, n_iter: int = 100,
         pixels are valid or no table is found.
     """
     depth = np.asarray(depth, dtype=np.float64)
-    valid = np.isfinite(depth) & (depth > 0)
-    if depth_valid is not None:
-        valid &= np.asarray(depth_valid, dtype=bool)
+    valid = valid_depth(depth, depth_valid)
     if valid.sum() < 50:
         return None
     fit = _table_surface(np.where(valid, depth, 1.0), valid, degree, stride, n_iter, tol, band,
@@ -311,9 +318,7 @@ def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride:
     if int(degree) != degree or degree < 1:
         raise ValueError(f"degree must be an integer >= 1, got {degree!r}")
     depth = np.asarray(depth, dtype=np.float64)
-    valid = np.isfinite(depth) & (depth > 0)
-    if depth_valid is not None:
-        valid &= np.asarray(depth_valid, dtype=bool)
+    valid = valid_depth(depth, depth_valid)
     H, W = depth.shape
     empty = np.zeros((H, W), dtype=bool)
     if valid.sum() < 50:
@@ -509,14 +514,11 @@ def opening_widths(obs: dict, rects, region=None) -> np.ndarray:
     if obs.get("K") is None:
         raise ValueError("measuring openings in metres needs the observation's camera matrix "
                          "'K' (SearchGrid.max_width)")
-    K = np.asarray(obs["K"], dtype=float)
-    if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ValueError(f"observation 'K' must be a 3x3 camera matrix with positive focal "
-                         f"lengths, got {K.tolist()}")
+    from ..datasets import check_camera_matrix
+
+    K = check_camera_matrix(obs["K"], "observation 'K'")
     depth = np.asarray(obs["depth"], dtype=float)
-    valid = np.isfinite(depth) & (depth > 0)
-    if obs.get("depth_valid") is not None:
-        valid &= np.asarray(obs["depth_valid"], dtype=bool)
+    valid = valid_depth(depth, obs.get("depth_valid"))
     rects = np.asarray(rects, dtype=float).reshape(-1, 5)
     if not valid.any():
         return np.full(len(rects), np.inf)

@@ -22,8 +22,8 @@ import time
 import numpy as np
 
 from ..rectangles import GraspRectangle
-from .exact import Detection, _check_obs, _empty
-from .grid import object_region, table_surface
+from .exact import Detection, _check_obs, _empty, _observed_region
+from .grid import table_surface
 from .model import PATCHES_PER_RECTANGLE
 
 __all__ = ["LatticeDetector", "chord", "chords", "lattice_candidates", "lattice_step",
@@ -283,15 +283,11 @@ class LatticeDetector:
                              "matrix 'K'")
         if self.budget is not None and int(self.budget) < 1:
             raise ValueError(f"budget must be >= 1 or None, got {self.budget}")
+        valid, region, how, reason = _observed_region(obs, self.background, self.region,
+                                                      self.min_height)
+        if reason:
+            return np.zeros((0, 5)), reason, region
         depth = np.asarray(obs["depth"], dtype=float)
-        valid = np.isfinite(depth) & (depth > 0)
-        if obs.get("depth_valid") is not None:
-            valid &= np.asarray(obs["depth_valid"], dtype=bool)
-        if not valid.any():
-            return np.zeros((0, 5)), "the depth image has no valid pixel (all masked)", None
-        region, how = object_region(obs, self.background, self.region, self.min_height)
-        if not region.any():
-            return np.zeros((0, 5)), f"empty object region (method {how})", region
         rng = np.random.default_rng(self.seed)
         _, step = lattice_step(self.jaw_px, self.spacing)
         offset = rng.uniform(0.0, step, size=2)

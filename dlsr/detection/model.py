@@ -176,8 +176,7 @@ class DLSRDetector:
             region, _ = object_region(obs)
         if table is None:
             table = table_surface(obs["depth"], obs.get("depth_valid"))
-        F = physical_features(obs, rects, region, table,
-                              finger=float(self.config.get("physical_finger", 0.008)))
+        F = physical_features(obs, rects, region, table)
         enc = PhysicalEncoder()
         enc.edges_ = [np.asarray(e, dtype=float) for e in self.physical_edges]
         return enc.transform(F).astype(np.float64) @ np.asarray(self.physical_coef, np.float64)

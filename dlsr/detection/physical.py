@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .grid import opening_widths
+from .grid import opening_widths, valid_depth
 
 __all__ = ["PHYSICAL_FEATURES", "PhysicalEncoder", "mask_axes", "physical_features"]
 
@@ -152,9 +152,7 @@ def physical_features(obs: dict, rects, region, table=None,
     out = np.zeros((n, len(PHYSICAL_FEATURES)))
     if n == 0:
         return out
-    valid = np.isfinite(depth) & (depth > 0)
-    if obs.get("depth_valid") is not None:
-        valid &= np.asarray(obs["depth_valid"], dtype=bool)
+    valid = valid_depth(depth, obs.get("depth_valid"))
     opening = opening_widths(obs, rects, region)
     out[:, 0] = opening
     out[:, 1] = opening * rects[:, 4] / np.maximum(rects[:, 3], 1e-9)

@@ -186,17 +186,21 @@ def _check_quantile(q, name: str) -> None:
         raise ValueError(f"{name} must be in [0, 0.5), got {q}")
 
 
-def check_training_options(fit_grid=None, hard_negatives=0, hard_rounds=1) -> None:
+def check_training_options(fit_grid=None, hard_negatives=0, hard_rounds=1,
+                           physical: bool = False) -> None:
     """Clear errors for the detector training options beyond the paper, before any work.
 
     ``fit_grid`` is None or a quantile in ``[0, 0.5)`` (:func:`fit_search_grid`);
-    ``hard_negatives`` and ``hard_rounds`` are integers >= 0 (:func:`train_detector`).
+    ``hard_negatives`` and ``hard_rounds`` are integers >= 0 (:func:`train_detector`), and
+    hard negatives are not mined for a model with ``physical`` features.
     """
     if fit_grid is not None:
         _check_quantile(fit_grid, "fit_grid")
     for name, value in (("hard_negatives", hard_negatives), ("hard_rounds", hard_rounds)):
         if int(value) != value or value < 0:
             raise ValueError(f"{name} must be an integer >= 0, got {value}")
+    if physical and hard_negatives:
+        raise ValueError("physical features and hard_negatives do not go together yet")
 
 
 def fit_search_grid(positives, grid: SearchGrid = PAPER_GRID,
@@ -345,9 +349,9 @@ def train_detector(
     if encoder_param is None and encoder != "Natural":
         grid = ENCODER_GRIDS[encoder]
         encoder_param = grid[len(grid) // 2 - 1]
-    check_training_options(fit_grid, hard_negatives, hard_rounds)
+    check_training_options(fit_grid, hard_negatives, hard_rounds, physical)
     if physical:
-        _check_physical_options(samples, physical_weight, physical_bins, hard_negatives)
+        _check_physical_options(samples, physical_weight, physical_bins)
     if isinstance(extra_patches, (str, os.PathLike)):
         from .patches import load_patch_file
 
@@ -447,13 +451,11 @@ def train_detector(
                         physical_edges=edges, physical_coef=w_phys)
 
 
-def _check_physical_options(samples, weight, bins, hard_negatives) -> None:
+def _check_physical_options(samples, weight, bins) -> None:
     if not (np.isfinite(weight) and weight > 0):
         raise ValueError(f"physical_weight must be a finite number > 0, got {weight}")
     if int(bins) < 2:
         raise ValueError(f"physical_bins must be >= 2, got {bins}")
-    if hard_negatives:
-        raise ValueError("physical features and hard-negative mining do not go together yet")
     for s in samples:
         if s.K is None:
             raise ValueError(f"physical features need each image's camera matrix: image "
