@@ -363,6 +363,39 @@ def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride:
     return _fill_holes(region.astype(bool) & comp)
 
 
+def complete_region(region, valid) -> np.ndarray:
+    """The object region with the missing depth inside its convex hull added.
+
+    A structured-light sensor returns little or no depth on the top of a dark, specular or
+    transparent object seen from above, so the region found from depth
+    (:func:`table_plane_mask`) is a scatter of small islands where the object is one disc;
+    the missing pixels between them are the object's unseen surface. The table around the
+    object (valid depth) stays outside, and so does missing depth outside the hull (most of a
+    projector shadow, which falls beside the object).
+
+    Parameters
+    ----------
+    region : ndarray of shape (H, W), bool
+    valid : ndarray of shape (H, W), bool
+        Pixels with depth (:func:`valid_depth`).
+
+    Returns
+    -------
+    ndarray of shape (H, W), bool
+        A new array; ``region`` itself when it is empty.
+    """
+    region = np.asarray(region, dtype=bool)
+    valid = np.asarray(valid, dtype=bool)
+    if region.shape != valid.shape or region.ndim != 2:
+        raise ValueError(f"region {region.shape} and valid {valid.shape} must be the same "
+                         "(H, W)")
+    if not region.any():
+        return region
+    hull = np.zeros(region.shape, np.uint8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(np.argwhere(region)[:, ::-1].astype(np.int32)), 1)
+    return region | (hull.astype(bool) & ~valid)
+
+
 def object_region(obs: dict, background=None, method: str = "auto", min_height: float = 0.006):
     """The object region of an observation and how it was found.
 

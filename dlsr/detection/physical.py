@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .grid import opening_widths, valid_depth
+from .grid import complete_region, opening_widths, valid_depth
 
 __all__ = ["PHYSICAL_FEATURES", "PhysicalEncoder", "mask_axes", "physical_features"]
 
@@ -100,7 +100,9 @@ def physical_features(obs: dict, rects, region, table=None,
     rects : ndarray of shape (n, 5)
         ``(x, y, theta, w, h)``, pixels and radians (:class:`dlsr.rectangles.GraspRectangle`).
     region : ndarray of shape (H, W), bool
-        The object region (:func:`dlsr.detection.object_region`).
+        The object region (:func:`dlsr.detection.object_region`); the features measure it
+        with its unseen surface added (:func:`dlsr.detection.complete_region`: the missing
+        depth inside its convex hull), as the lattice detector lays its candidates.
     table : ndarray of shape (H, W) or None
         The table's depth at every pixel (:func:`dlsr.detection.table_surface`), metres; None
         (no table found) measures heights from the deepest valid pixel of the region's
@@ -153,6 +155,7 @@ def physical_features(obs: dict, rects, region, table=None,
     if n == 0:
         return out
     valid = valid_depth(depth, obs.get("depth_valid"))
+    region = complete_region(region, valid)
     opening = opening_widths(obs, rects, region)
     out[:, 0] = opening
     out[:, 1] = opening * rects[:, 4] / np.maximum(rects[:, 3], 1e-9)

@@ -250,3 +250,52 @@ def test_lattice_fills_depth_holes_in_the_region_before_laying_the_lattice(physi
     inside = lambda c: ((c[:, 0] > 62) & (c[:, 0] < 98)).sum()  # noqa: E731
     assert inside(holey) < inside(filled)  # lattice points on the hole come back
     assert np.array_equal(obs["depth"][60, 80], np.float32(0.0))  # the input is untouched
+
+
+def _dark_top(seed=0):
+    """A 40 px disc 5 cm above the table whose top the sensor hardly returns: valid depth on
+    four small islands of it only, and a projector shadow (missing depth) beside it."""
+    obs = _scene(seed)
+    yy, xx = np.mgrid[:H, :W]
+    disc = (xx - 80) ** 2 + (yy - 60) ** 2 <= 20**2
+    islands = np.zeros((H, W), bool)
+    for cx, cy in ((64, 60), (96, 60), (80, 44), (80, 76)):
+        islands |= (np.abs(xx - cx) <= 2) & (np.abs(yy - cy) <= 2)
+    valid = ~disc | islands
+    valid[50:70, 40:58] = False  # the shadow, left of the disc
+    depth = np.where(disc, 0.75, 0.8).astype(np.float32)
+    obs.update(depth=np.where(valid, depth, 0.0).astype(np.float32), depth_valid=valid,
+               mask=islands)
+    return obs, disc
+
+
+def test_complete_region_adds_the_unseen_top_inside_the_hull():
+    from dlsr.detection import complete_region
+
+    obs, _ = _dark_top()
+    region, valid = obs["mask"], obs["depth_valid"]
+    before = region.copy()
+    full = complete_region(region, valid)
+    np.testing.assert_array_equal(region, before)  # the input is untouched
+    assert full[region].all() and not full[valid & ~region].any()  # no table pixel joins
+    # the disc's unseen pixels between the islands join (the hull is the islands' diamond)
+    assert full[58:63, 66:95].all() and full[46:75, 78:83].all()
+    assert not full[50:70, 40:58].any()  # the shadow outside the hull stays out
+    assert not complete_region(np.zeros((H, W), bool), valid).any()
+    # the physical features measure the completed region: a centre on the unseen top is on it
+    P = physical_features(obs, np.array([[80.0, 60.0, 0.0, 50.0, 12.0]]), region,
+                          table_surface(obs["depth"], valid))
+    assert P[0, COL["centre_on_object"]] == 1.0
+    assert P[0, COL["offset_major"]] < 0.2
+    with pytest.raises(ValueError, match="same"):
+        complete_region(region, valid[:10])
+
+
+def test_lattice_spans_an_object_whose_top_the_sensor_missed(physical_model):
+    obs, _ = _dark_top()
+    det = physical_model.detector("lattice", budget=None)
+    whole, _, _ = det.candidates(obs)
+    det.complete = False
+    islands, _, _ = det.candidates(obs)
+    # closing through the disc's centre spans its 40 px only with the unseen top counted
+    assert whole[:, 3].max() >= 30 > islands[:, 3].max()
