@@ -120,8 +120,30 @@ def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
 
 
 def resolve_objects(objects) -> list[ObjectSpec]:
-    """``"train"``, ``"test"``, ``"all"`` (built-in set) or a list of ObjectSpec."""
-    if isinstance(objects, str):
+    """The objects of a run.
+
+    Parameters
+    ----------
+    objects : str or list of ObjectSpec
+        ``"train"``, ``"test"``, ``"all"`` (the built-in set's split), comma-separated names
+        of built-in objects (``"bottle_water,can_soda"``; kept in the built-in set's order, so
+        the scenes of a seed depend on the names chosen, not on how they are listed), or
+        ObjectSpecs.
+
+    Raises
+    ------
+    ValueError
+        Naming an object the built-in set does not have (the message lists them), or no object.
+    """
+    if isinstance(objects, str) and objects not in ("train", "test", "all"):
+        names = [n.strip() for n in objects.split(",") if n.strip()]
+        every = builtin_objects("all")
+        unknown = sorted(set(names) - {s.name for s in every})
+        if unknown:
+            raise ValueError(f"no built-in object named {', '.join(unknown)}; choose train, "
+                             "test, all or names of: " + ", ".join(s.name for s in every))
+        specs = [s for s in every if s.name in set(names)]
+    elif isinstance(objects, str):
         specs = builtin_objects(objects)
     else:
         specs = list(objects)

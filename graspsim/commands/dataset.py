@@ -14,7 +14,9 @@ def register(subparsers) -> None:
         "dataset", help="render scenes, label rectangles by physics, write the Cornell layout"
     )
     p.add_argument("--scenes", type=int, required=True, help="number of images")
-    p.add_argument("--objects", default="train", choices=["train", "test", "all"])
+    p.add_argument("--objects", default="train",
+                   help="train, test, all (the built-in split) or comma-separated "
+                        "names of built-in objects")
     p.add_argument("--out", required=True, help="dataset root folder")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--candidates", type=int, default=48, help="rectangles labelled per scene")

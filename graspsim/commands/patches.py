@@ -13,7 +13,9 @@ def register(subparsers) -> None:
     )
     p.add_argument("--n", type=int, default=100_000, help="number of patches")
     p.add_argument("--out", required=True, help=".npz file (dlsr.patches.load_patch_file)")
-    p.add_argument("--objects", default="all", choices=["train", "test", "all"])
+    p.add_argument("--objects", default="all",
+                   help="train, test, all (the built-in split) or comma-separated "
+                        "names of built-in objects")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--scenes", type=int, default=None, help="default: n / 2000")
     add_executor_args(p)

@@ -27,7 +27,9 @@ def register(subparsers) -> None:
                         "seen surface); a DLSR model also searches only rectangles whose jaws "
                         "come down beside the object (its grid) or openings within reach (its "
                         "lattice), and ranks its best 40 (not in the paper)")
-    p.add_argument("--objects", default="test", choices=["train", "test", "all"])
+    p.add_argument("--objects", default="test",
+                   help="train, test, all (the built-in split) or comma-separated "
+                        "names of built-in objects")
     p.add_argument("--n", type=int, default=200,
                    help="number of trials (with --declutter: of rounds)")
     p.add_argument("--seed", type=int, default=0)

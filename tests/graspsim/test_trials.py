@@ -208,3 +208,18 @@ def test_dense_sampler_in_trials_and_old_config_folders_resume(tmp_path, easy_ob
     again = run_trials("random", objects=easy_objects, n=2, seed=3, out=old,
                        config=TrialConfig(n_candidates=0))
     assert again["n"] == 2
+
+
+def test_objects_by_name_keep_the_built_in_order_and_name_the_unknown():
+    from graspsim.objects import builtin_objects
+    from graspsim.trials import resolve_objects
+
+    train = [s.name for s in builtin_objects("train")]
+    a, b = train[3], train[7]
+    assert [s.name for s in resolve_objects(f"{b}, {a}")] == [a, b]
+    assert [s.name for s in resolve_objects(f"{a},{b}")] == [a, b]
+    assert [s.name for s in resolve_objects("test")] == [s.name for s in builtin_objects("test")]
+    with pytest.raises(ValueError, match="no built-in object named teapot; .*" + a):
+        resolve_objects(f"{a},teapot")
+    with pytest.raises(ValueError, match="no objects"):
+        resolve_objects(" , ")
