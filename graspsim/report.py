@@ -452,7 +452,8 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
                      "opening in metres, heights of the centre and the finger footprints "
                      "above the table, place on the object's axes)")
     lattice = config.detector == "lattice"
-    search = ("rectangles fitted to the object region (not in the paper: lattice points "
+    search = ("rectangles fitted to the object region (not in the paper: the region "
+              "completed with the missing depth inside its convex hull, lattice points "
               "every 15 degrees, openings from the region's chords)" if lattice
               else "the paper's grid search")
     if config.gripper_aware:
