@@ -136,13 +136,13 @@ def resolve_objects(objects) -> list[ObjectSpec]:
         Naming an object the built-in set does not have (the message lists them), or no object.
     """
     if isinstance(objects, str) and objects not in ("train", "test", "all"):
-        names = [n.strip() for n in objects.split(",") if n.strip()]
+        names = {n.strip() for n in objects.split(",") if n.strip()}
         every = builtin_objects("all")
-        unknown = sorted(set(names) - {s.name for s in every})
+        unknown = sorted(names - {s.name for s in every})
         if unknown:
             raise ValueError(f"no built-in object named {', '.join(unknown)}; choose train, "
                              "test, all or names of: " + ", ".join(s.name for s in every))
-        specs = [s for s in every if s.name in set(names)]
+        specs = [s for s in every if s.name in names]
     elif isinstance(objects, str):
         specs = builtin_objects(objects)
     else:

@@ -185,7 +185,7 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
                 z = dep[cj, ci] if dep[cj, ci] > 0 else zc
                 c = c + (x0, y0)
                 w_max = (np.inf if max_opening is None else
-                             reach * float(max_width_px(z, th, intrinsics, max_opening)))
+                         reach * float(max_width_px(z, th, intrinsics, max_opening)))
                 for w in (length + margin_px, 1.3 * length + 2 * margin_px):
                     if w > w_max:
                         continue
