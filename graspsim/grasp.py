@@ -266,7 +266,7 @@ def rectangle_to_grasp(
 
 def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_depth=None,
                     tolerance: float = 0.003, tip_clearance: float = 0.001,
-                    samples: tuple[int, int] = (3, 7)) -> bool:
+                    samples: tuple[int, int] = (9, 21)) -> bool:
     """Whether the open fingers, coming down along the approach, would land on a seen surface.
 
     A depth-only check a detector can run before proposing a grasp (the gripper's geometry and
@@ -293,7 +293,11 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
     tolerance, tip_clearance : float
         Metres (``tip_clearance`` as :class:`graspsim.execution.ExecutionParams`).
     samples : (int, int)
-        Footprint points per finger along the closing direction and across it.
+        Footprint points per finger along the closing direction and across it. The default
+        puts them 1 mm apart over the 8 mm x 20 mm footprint, finer than a pixel at the
+        camera's working distance (1.3 mm at 0.7 m with f = 550 px), so a rim or edge inside
+        the footprint cannot fall between two samples (the earlier (3, 7), 4 mm and 3.3 mm
+        apart, let the gripper-aware detectors choose grasps whose fingers met such edges).
 
     Returns
     -------

@@ -14,7 +14,7 @@ from graspsim.grasp import (
     nearest_depth,
     rectangle_to_grasp,
 )
-from graspsim.gripper import PALM_OFFSET, TIP_OFFSET
+from graspsim.gripper import FINGER_THICKNESS, PAD_WIDTH, PALM_OFFSET, TIP_OFFSET
 
 F, CX, CY = 550.0, 319.5, 239.5
 K = np.array([[F, 0, CX], [0, F, CY], [0, 0, 1.0]])
@@ -238,3 +238,29 @@ def test_fingers_outside_the_image_or_without_a_pose_collide():
                               np.zeros_like(valid), K, look_down(0.75))
     assert none.T_world_grasp is None
     assert fingers_collide(none, depth, valid, K, look_down(0.75))
+
+
+def test_a_surface_on_any_pixel_of_a_finger_footprint_is_a_collision():
+    """One raised pixel anywhere inside a finger's footprint (a thin rim, a handle's edge) is
+    met on the way down: the footprint is sampled finer than a pixel, so nothing falls
+    between two samples."""
+    depth, valid = _block()
+    table = np.full(depth.shape, 0.75)
+    T = look_down(0.75)
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 52.0, 20.0), depth, valid, K, T)
+    assert not fingers_collide(g, depth, valid, K, T, table)
+    z_tcp = 0.75 - g.position[2]  # depth of the TCP under a camera looking straight down
+    # The +x finger's footprint (closing direction = image x), in pixels, one pixel inset.
+    u0 = CX + F * (g.opening / 2) / z_tcp + 1
+    u1 = CX + F * (g.opening / 2 + FINGER_THICKNESS) / z_tcp - 1
+    v0, v1 = CY - F * (PAD_WIDTH / 2) / z_tcp + 1, CY + F * (PAD_WIDTH / 2) / z_tcp - 1
+    pixels = [(u, v) for u in range(int(np.ceil(u0)), int(np.floor(u1)) + 1)
+              for v in range(int(np.ceil(v0)), int(np.floor(v1)) + 1)]
+    assert len(pixels) > 20
+    missed = []
+    for u, v in pixels:
+        pinned = depth.copy()
+        pinned[v, u] = 0.66  # a 1-pixel post rising 15 mm above the fingertips
+        if not fingers_collide(g, pinned, valid, K, T, table):
+            missed.append((u, v))
+    assert missed == []
