@@ -21,6 +21,7 @@ import time
 
 import numpy as np
 
+from ..datasets import check_camera_matrix
 from ..rectangles import GraspRectangle
 from .exact import Detection, _check_obs, _empty, _observed_region
 from .grid import complete_region, table_surface
@@ -96,10 +97,23 @@ def max_width_px(z, theta, intrinsics, max_opening: float):
     -------
     float or ndarray
         Pixels.
+
+    Raises
+    ------
+    ValueError
+        When ``intrinsics`` is not a 3x3 camera matrix of finite values with positive focal
+        lengths (:func:`dlsr.datasets.check_camera_matrix`).
     """
-    K = np.asarray(getattr(intrinsics, "K", intrinsics), dtype=float)
-    if K.shape != (3, 3):
-        raise ValueError(f"intrinsics must provide a 3x3 K, got shape {K.shape}")
+    return _max_width_px(z, theta, _camera_matrix(intrinsics), max_opening)
+
+
+def _camera_matrix(intrinsics) -> np.ndarray:
+    """``intrinsics`` (an object with ``K`` or the matrix itself) as a checked 3x3 array."""
+    return check_camera_matrix(getattr(intrinsics, "K", intrinsics), "intrinsics")
+
+
+def _max_width_px(z, theta, K, max_opening):
+    """:func:`max_width_px` with ``K`` already checked (called once per chord)."""
     scale = np.hypot(np.cos(theta) / K[0, 0], np.sin(theta) / K[1, 1])
     return max_opening / (np.asarray(z, dtype=float) * scale)
 
@@ -143,10 +157,17 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
     Returns
     -------
     list of GraspRectangle
+
+    Raises
+    ------
+    ValueError
+        With ``max_opening``, when ``intrinsics`` is not a valid camera matrix (as
+        :func:`max_width_px`), even for an empty mask.
     """
     jaws, step = lattice_step(jaw_px, spacing)
     if n_angles < 1:
         raise ValueError(f"n_angles must be >= 1, got {n_angles}")
+    K = None if max_opening is None else _camera_matrix(intrinsics)
     seen = set() if seen is None else seen
     full = np.asarray(mask, dtype=bool)
     depth = np.asarray(depth, dtype=float)
@@ -185,7 +206,7 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
                 z = dep[cj, ci] if dep[cj, ci] > 0 else zc
                 c = c + (x0, y0)
                 w_max = (np.inf if max_opening is None else
-                         reach * float(max_width_px(z, th, intrinsics, max_opening)))
+                         reach * float(_max_width_px(z, th, K, max_opening)))
                 for w in (length + margin_px, 1.3 * length + 2 * margin_px):
                     if w > w_max:
                         continue

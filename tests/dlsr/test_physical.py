@@ -12,6 +12,7 @@ from dlsr.detection import (
     LatticeDetector,
     PhysicalEncoder,
     lattice_candidates,
+    max_width_px,
     object_region,
     physical_features,
     table_surface,
@@ -125,6 +126,20 @@ def test_lattice_candidates_fit_the_object_and_the_reach():
     widths_m = np.array([r.w for r in narrow]) * 0.77 / F
     assert len(narrow) < len(rects) and (widths_m <= 0.95 * 0.05 + 1e-9).all()
     assert lattice_candidates(np.zeros((H, W), bool), obs["depth"], K, np.zeros(2), None) == []
+
+
+@pytest.mark.parametrize("bad", [np.full((3, 3), np.nan), np.diag([-F, F, 1.0]), np.eye(2)])
+def test_the_reach_needs_a_valid_camera_matrix(bad):
+    """With a NaN camera matrix every reach is NaN, and as comparisons with NaN are False every
+    candidate would pass, however wide: a clear error instead, as for any matrix that is not a
+    camera's."""
+    obs = _scene()
+    with pytest.raises(ValueError, match="intrinsics"):
+        lattice_candidates(obs["mask"], obs["depth"], bad, np.zeros(2), max_opening=0.05)
+    with pytest.raises(ValueError, match="intrinsics"):
+        max_width_px(0.7, 0.0, bad, 0.08)
+    # without a reach the matrix is not read
+    assert lattice_candidates(obs["mask"], obs["depth"], bad, np.zeros(2), max_opening=None)
 
 
 def _samples(n=3, with_K=True):
