@@ -206,6 +206,7 @@ def fit_representation(
     extra=None,
     random_state=None,
     dictionary_params: dict | None = None,
+    rows=None,
 ) -> Representation:
     """Learn whitening and a dictionary from random patches of the training rectangles.
 
@@ -224,6 +225,11 @@ def fit_representation(
     extra : tuple (patches, masks) or None
         Extra unlabelled patches (self-taught learning), each ``(m, 6, 6, 8)``.
     random_state : int, Generator, RandomState or None
+    dictionary_params : dict or None
+        Further keyword arguments of :func:`dlsr.dictionaries.learn_dictionary`.
+    rows : array-like of int or None
+        Learn from these rectangles only (positions in ``images``): the same representation as
+        from ``images[rows]`` and ``masks[rows]``, without copying them. None uses all.
 
     Returns
     -------
@@ -235,7 +241,7 @@ def fit_representation(
     seeds = rs.randint(0, 2**31 - 1, size=2)
     X, M = patches.sample_patches(
         images, masks, n_patches=n_patches, min_valid=min_valid,
-        random_state=int(seeds[0]), extra=extra,
+        random_state=int(seeds[0]), extra=extra, rows=rows,
     )
     Xs = whitening.standardize_patches(X, M)
     if whiten:
@@ -439,6 +445,7 @@ def rectangle_features_multi(
     polarity: bool = True,
     chunk_size: int = 64,
     cpu_seconds: dict | None = None,
+    rows=None,
 ) -> dict:
     """Features of many rectangles for several encoders and parameters, streamed in chunks.
 
@@ -457,6 +464,9 @@ def rectangle_features_multi(
     cpu_seconds : dict or None
         When given, process CPU seconds are added per computation ``(method, masked)`` and
         under ``"patches"`` (extraction, standardisation, whitening) and ``"pooling"``.
+    rows : array-like of int or None
+        Featurise these rectangles only, in this order (positions in ``images``): the features
+        of ``images[rows]`` without copying them, a chunk at a time. None featurises all.
 
     Returns
     -------
@@ -465,7 +475,10 @@ def rectangle_features_multi(
     """
     images = np.asarray(images, dtype=np.float32)
     masks = np.asarray(masks, dtype=bool)
-    n = len(images)
+    if masks.shape != images.shape:
+        raise ValueError(f"masks shape {masks.shape} does not match images {images.shape}")
+    rows = patches.check_rows(rows, len(images))
+    n = len(images) if rows is None else len(rows)
     if n == 0:
         raise ValueError("no rectangles to featurise")
     for enc, params in grids.items():
@@ -477,8 +490,9 @@ def rectangle_features_multi(
         out = None
         for start in range(0, n, chunk_size):
             c0 = time.process_time()
-            P, PM = patches.extract_patches(images[start:start + chunk_size],
-                                            masks[start:start + chunk_size], PATCH_SIZE)
+            stop = start + chunk_size
+            sel = slice(start, stop) if rows is None else rows[start:stop]
+            P, PM = patches.extract_patches(images[sel], masks[sel], PATCH_SIZE)
             b, g, p = P.shape
             Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
                                      (rep.zca_mean, rep.zca_matrix))

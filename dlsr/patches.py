@@ -28,7 +28,11 @@ __all__ = [
     "sample_patches",
     "load_patch_file",
     "save_patch_file",
+    "check_rows",
 ]
+
+
+_ROW_CHUNK = 4096  # images per step when counting the valid entries of selected rows
 
 
 def _check_images(images, masks):
@@ -44,6 +48,25 @@ def _check_images(images, masks):
             raise ValueError(f"masks shape {masks.shape} does not match images {images.shape}")
         masks = masks.astype(bool, copy=False)
     return images, masks
+
+
+def check_rows(rows, n: int) -> np.ndarray | None:
+    """Validate ``rows``, positions of images among ``n`` (None: all of them, in order).
+
+    Returns
+    -------
+    ndarray of shape (k,), intp, or None
+    """
+    if rows is None:
+        return None
+    r = np.asarray(rows)
+    if r.ndim != 1 or (r.size and not np.issubdtype(r.dtype, np.integer)):
+        raise ValueError(f"rows must be a 1-d array of image positions, got {r.dtype} of shape "
+                         f"{r.shape}")
+    r = r.astype(np.intp, copy=False)
+    if r.size and (r.min() < 0 or r.max() >= n):
+        raise ValueError(f"rows must be in [0, {n}), got values from {r.min()} to {r.max()}")
+    return r
 
 
 def _windows(a, p):
@@ -123,6 +146,7 @@ def sample_patches(
     patch_size: int = 6,
     extra_fraction: float | None = None,
     return_index: bool = False,
+    rows=None,
 ):
     """Random patches across rectangle images, optionally mixed with extra unlabelled patches.
 
@@ -147,6 +171,11 @@ def sample_patches(
         ``[0, 1]`` draws ``round(extra_fraction * n_patches)`` patches from the extra ones.
     return_index : bool, default=False
         Also return where each patch comes from.
+    rows : array-like of int or None
+        Draw from these images only, in this order: the same patches as from ``images[rows]``
+        and ``masks[rows]`` (and the returned index counts images within ``rows``), without
+        copying the selected images (a training fold of a large, memory-mapped set). None
+        draws from all.
 
     Returns
     -------
@@ -164,6 +193,7 @@ def sample_patches(
     """
     images, masks = _check_images(images, masks)
     n, S, S2, C = images.shape
+    rows = check_rows(rows, n)
     p = int(patch_size)
     if p < 1 or p > min(S, S2):
         raise ValueError(f"patch_size must be in [1, {min(S, S2)}], got {patch_size}")
@@ -178,7 +208,13 @@ def sample_patches(
     d = p * p * C
     need = min_valid * d - 1e-9
 
-    counts = masks.sum(axis=3, dtype=np.int32)
+    if rows is None:
+        counts = masks.sum(axis=3, dtype=np.int32)
+    else:  # in chunks: masks[rows] whole would be the copy that rows avoids
+        counts = np.empty((len(rows), S, S2), dtype=np.int32)
+        for start in range(0, len(rows), _ROW_CHUNK):
+            sel = rows[start:start + _ROW_CHUNK]
+            counts[start:start + len(sel)] = masks[sel].sum(axis=3, dtype=np.int32)
     win = sliding_window_view(counts, (p, p), axis=(1, 2)).sum(axis=(3, 4))  # (n, G1, G2)
     cand = np.flatnonzero(win.ravel() >= need)
     if extra is not None:
@@ -213,8 +249,9 @@ def sample_patches(
     G1, G2 = win.shape[1], win.shape[2]
     img_i, rem = np.divmod(flat, G1 * G2)
     row_i, col_i = np.divmod(rem, G2)
-    Xi = _windows(images, p)[img_i, row_i, col_i].reshape(len(flat), d)
-    Mi = _windows(masks, p)[img_i, row_i, col_i].reshape(len(flat), d)
+    src = img_i if rows is None else rows[img_i]
+    Xi = _windows(images, p)[src, row_i, col_i].reshape(len(flat), d)
+    Mi = _windows(masks, p)[src, row_i, col_i].reshape(len(flat), d)
     idx_i = np.column_stack([img_i, row_i, col_i])
     if len(from_ext):
         ek = ecand[from_ext]

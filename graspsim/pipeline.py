@@ -22,6 +22,7 @@ import dataclasses
 import json
 import logging
 import platform
+import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from importlib import metadata
@@ -371,15 +372,21 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         from dlsr import recognition as rec
 
         t0 = time.perf_counter()
+        # The rectangle images go to a file that the workers map (no copy per worker).
+        mapped = root / "recognition" / "data"
         data = rec.recognition_data(samples, random_state=seeds["recognition"])
-        with ex.activate():  # the CV folds run on the chosen backend (joblib inside dlsr)
-            summary = rec.run_recognition_benchmark(
-                data, root / "recognition", learners=[config.learner],
-                encoders=[config.encoder], split="object", n_folds=config.folds,
-                inner_folds=config.inner_folds, n_atoms=config.n_atoms,
-                n_patches=config.n_patches, random_state=seeds["recognition"],
-                n_jobs=config.jobs, progress=progress,
-            )
+        data = data.memory_mapped(mapped)
+        try:
+            with ex.activate():  # the CV folds run on the chosen backend (joblib inside dlsr)
+                summary = rec.run_recognition_benchmark(
+                    data, root / "recognition", learners=[config.learner],
+                    encoders=[config.encoder], split="object", n_folds=config.folds,
+                    inner_folds=config.inner_folds, n_atoms=config.n_atoms,
+                    n_patches=config.n_patches, random_state=seeds["recognition"],
+                    n_jobs=config.jobs, progress=progress,
+                )
+        finally:
+            shutil.rmtree(mapped, ignore_errors=True)
         cell = summary["cells"][0]
         stages.finish("recognition", {
             "accuracy": cell["accuracy"], "std": cell["std"],

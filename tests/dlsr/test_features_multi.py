@@ -94,6 +94,18 @@ def test_rectangle_features_multi_equals_one_encoder_at_a_time():
             assert a.shape == (7, 4 * 2 * 16)
             np.testing.assert_allclose(a, b, atol=1e-3, rtol=1e-5)
     assert cpu["patches"] > 0 and "pooling" in cpu
+    rows = np.array([6, 1, 1, 3])  # a fold's rectangles, without copying them first
+    picked = rectangle_features_multi(images, masks, rep, grids, chunk_size=3, rows=rows)
+    copied = rectangle_features_multi(images[rows], masks[rows], rep, grids, chunk_size=3)
+    for enc in grids:
+        for a, b in zip(picked[enc], copied[enc], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="rows must be in"):
+        rectangle_features_multi(images, masks, rep, grids, rows=[7])
+    with pytest.raises(ValueError, match="no rectangles"):
+        rectangle_features_multi(images, masks, rep, grids, rows=np.zeros(0, int))
+    with pytest.raises(ValueError, match="does not match"):
+        rectangle_features_multi(images, masks[:6], rep, grids)
     with pytest.raises(ValueError, match="unknown encoder"):
         rectangle_features_multi(images, masks, rep, {"XYZ": (1,)})
     with pytest.raises(ValueError, match="at least one encoder parameter"):

@@ -157,3 +157,24 @@ def test_real_patches(jacquard_view):
     flatX = X.reshape(-1, 288)
     rows = {r.tobytes() for r in flatX[M.reshape(-1, 288).mean(axis=1) >= 0.2]}
     assert all(x.tobytes() in rows for x in Xs[:200])
+
+
+def test_drawing_from_rows_is_drawing_from_those_images():
+    images, masks = _images(n=9, seed=3)
+    masks[4] = False  # one selected image with nothing valid
+    images[4] = 0
+    rows = np.array([7, 2, 4, 2, 0])  # any order, repeats allowed
+    for extra in (None, (np.ones((50, 288), np.float32), np.ones((50, 288), bool))):
+        a = sample_patches(images, masks, n_patches=700, random_state=5, extra=extra,
+                           return_index=True, rows=rows)
+        b = sample_patches(images[rows], masks[rows], n_patches=700, random_state=5,
+                           extra=extra, return_index=True)
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+    assert not np.any(a[2][:, 0] == 2)  # position 2 of rows is the empty image 4
+    X, _ = sample_patches(images, masks, n_patches=300, random_state=5, rows=rows[:1])
+    assert np.all(np.isin(X[:, 0], images[7, :19, :19, 0]))  # image 7 only
+    for bad, match in [([9], "in \\[0, 9\\)"), ([-1], "in \\[0, 9\\)"), ([0.5], "1-d array"),
+                       ([[0, 1]], "1-d array")]:
+        with pytest.raises(ValueError, match=match):
+            sample_patches(images, masks, n_patches=10, rows=np.array(bad))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -94,6 +95,18 @@ def test_chunking_does_not_change_features(separable):
     np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5)
 
 
+def test_a_fold_is_learned_from_its_rows_as_from_a_copy_of_them(separable):
+    """The CV folds learn from the whole (memory-mapped) set and the fold's rows, not from a
+    copy of the fold: the same representation."""
+    train = np.flatnonzero(separable.groups("object") != "obj2")[::-1]
+    a = fit_representation(separable.images, separable.masks, "NKM", random_state=1,
+                           rows=train, **SMALL)
+    b = fit_representation(separable.images[train], separable.masks[train], "NKM",
+                           random_state=1, **SMALL)
+    for x, y in zip(a.to_arrays().values(), b.to_arrays().values(), strict=True):
+        np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-6)
+
+
 def test_pipeline_beats_chance_with_group_cv(separable):
     X = pack_images(separable.images, separable.masks)
     model = rec.make_recognition_model("NKM", "Natural", C=1.0, random_state=0, **SMALL)
@@ -110,6 +123,21 @@ def test_nested_cv_beats_chance_and_keeps_folds_clean(separable):
     assert sum(f["n_test"] for f in out["folds"]) == len(separable)
     for f in out["folds"]:
         assert f["C"] in rec.C_GRID
+
+
+def test_memory_mapped_data_gives_the_same_cross_validation(separable, tmp_path):
+    mapped = separable.memory_mapped(tmp_path / "data")
+    for name in ("images", "masks"):
+        a = getattr(mapped, name)
+        assert isinstance(a, np.memmap) and not a.flags.writeable
+        assert Path(a.filename) == (tmp_path / "data" / f"{name}.npy").resolve()
+        np.testing.assert_array_equal(a, getattr(separable, name))
+    assert mapped.labels is separable.labels
+    runs = [rec.nested_cv_cell(d, "NKM", "Natural", split="object", n_folds=2, inner_folds=2,
+                               random_state=0, n_jobs=2, **SMALL) for d in (separable, mapped)]
+    assert runs[0]["accuracy"] == runs[1]["accuracy"]
+    for a, b in zip(runs[0]["folds"], runs[1]["folds"], strict=True):
+        assert a["predictions"] == b["predictions"]
 
 
 def test_outer_folds_never_share_a_group(separable):

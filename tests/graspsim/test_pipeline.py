@@ -36,6 +36,7 @@ def test_run_writes_every_stage_and_the_report(tiny_run):
                            "trials/dlsr", "trials/dlsr-paper", "trials/mask-pca"}
     assert stages["dataset"]["images"] == 6
     assert 0.0 <= stages["recognition"]["accuracy"] <= 1.0
+    assert not (out / "recognition" / "data").exists()  # the workers' mapped copy is removed
     for name in ("dlsr", "dlsr-paper", "mask-pca"):
         s = stages[f"trials/{name}"]
         assert s["n"] == 3 and 0 <= s["successes"] <= 3
