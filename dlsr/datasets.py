@@ -416,7 +416,9 @@ def read_camera_matrix(path) -> np.ndarray:
 
 def check_camera_matrix(K, what: str = "the camera matrix 'K'") -> np.ndarray:
     """``K`` as a float (3, 3) array, or a ValueError naming ``what`` unless it is a 3x3
-    camera matrix of finite values with positive focal lengths."""
+    camera matrix of finite values with positive focal lengths. An object with a ``K``
+    attribute (camera intrinsics) stands for its matrix."""
+    K = getattr(K, "K", K)
     try:
         K = np.asarray(K, dtype=float)
     except (ValueError, TypeError) as e:

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dlsr.datasets import check_camera_matrix
 from dlsr.rectangles import GraspRectangle
 
 from .gripper import (
@@ -105,14 +106,6 @@ class Grasp:
             "depth": None if not np.isfinite(self.depth) else round(float(self.depth), 6),
             "failure": self.failure,
         }
-
-
-def _intrinsic_matrix(intrinsics) -> np.ndarray:
-    K = getattr(intrinsics, "K", intrinsics)
-    K = np.asarray(K, dtype=float)
-    if K.shape != (3, 3):
-        raise ValueError(f"intrinsics must provide a 3x3 K, got shape {K.shape}")
-    return K
 
 
 def _region_depths(rect: GraspRectangle, depth, valid, fraction: float) -> np.ndarray:
@@ -232,7 +225,7 @@ def rectangle_to_grasp(
         rectangle has no valid depth; with ``failure="too wide for the gripper"`` when
         ``w z / f > max_opening``.
     """
-    K = _intrinsic_matrix(intrinsics)
+    K = check_camera_matrix(intrinsics, "intrinsics")
     T_world_cam = np.asarray(T_world_cam, dtype=float)
     if T_world_cam.shape != (4, 4):
         raise ValueError(f"T_world_cam must be 4x4, got shape {T_world_cam.shape}")
@@ -306,7 +299,7 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
     """
     if grasp.T_world_grasp is None:
         return True
-    K = _intrinsic_matrix(intrinsics)
+    K = check_camera_matrix(intrinsics, "intrinsics")
     depth = np.asarray(depth)
     H, W = depth.shape
     T_cam_grasp = np.linalg.inv(np.asarray(T_world_cam, dtype=float)) @ grasp.T_world_grasp

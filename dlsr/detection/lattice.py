@@ -104,12 +104,7 @@ def max_width_px(z, theta, intrinsics, max_opening: float):
         When ``intrinsics`` is not a 3x3 camera matrix of finite values with positive focal
         lengths (:func:`dlsr.datasets.check_camera_matrix`).
     """
-    return _max_width_px(z, theta, _camera_matrix(intrinsics), max_opening)
-
-
-def _camera_matrix(intrinsics) -> np.ndarray:
-    """``intrinsics`` (an object with ``K`` or the matrix itself) as a checked 3x3 array."""
-    return check_camera_matrix(getattr(intrinsics, "K", intrinsics), "intrinsics")
+    return _max_width_px(z, theta, check_camera_matrix(intrinsics, "intrinsics"), max_opening)
 
 
 def _max_width_px(z, theta, K, max_opening):
@@ -167,7 +162,7 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
     jaws, step = lattice_step(jaw_px, spacing)
     if n_angles < 1:
         raise ValueError(f"n_angles must be >= 1, got {n_angles}")
-    K = None if max_opening is None else _camera_matrix(intrinsics)
+    K = None if max_opening is None else check_camera_matrix(intrinsics, "intrinsics")
     seen = set() if seen is None else seen
     full = np.asarray(mask, dtype=bool)
     depth = np.asarray(depth, dtype=float)

@@ -140,6 +140,13 @@ def test_inputs_are_not_mutated_and_bad_shapes_raise():
         rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid, K, np.eye(3))
     with pytest.raises(ValueError, match="same"):
         rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid[:10], K, T)
+    # a camera matrix that would make every pose NaN or infinite is refused, by both functions
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid, K, T)
+    for bad in (np.full((3, 3), np.nan), np.diag([0.0, F, 1.0]), np.eye(2)):
+        with pytest.raises(ValueError, match="intrinsics must be a 3x3 camera matrix"):
+            rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth, valid, bad, T)
+        with pytest.raises(ValueError, match="intrinsics must be a 3x3 camera matrix"):
+            fingers_collide(g, depth, valid, bad, T)
 
 
 def cup(rim_depth=0.60, inner_depth=0.68, rim_px=(20, 28)):
