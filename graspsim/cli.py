@@ -54,6 +54,9 @@ def main(argv: list[str] | None = None) -> int:
         if exc.filename is None:  # not about a file the user gave: a real failure
             raise
         return _error(args.command, exc)  # a folder given as a file, no permission, ...
+    except KeyboardInterrupt:  # Ctrl-C: one line, the shell's code for SIGINT
+        print(f"graspsim {args.command}: interrupted", file=sys.stderr)
+        return 130
     return int(result or 0)
 
 

@@ -32,7 +32,7 @@ from dlsr.records import file_errors, read_json, write_json_atomic
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunConfig", "load_config", "run_job", "resume_job", "QUICK"]
+__all__ = ["RunConfig", "load_config", "run_folder", "run_job", "resume_job", "QUICK"]
 
 
 @dataclass
@@ -310,6 +310,11 @@ def _recorded_config(recorded):
         return recorded
 
 
+def run_folder(config: RunConfig, out=None) -> Path:
+    """Where :func:`run_job` writes: ``out``, or ``runs/<config.name>`` when it is None."""
+    return Path(out) if out is not None else Path("runs") / config.name
+
+
 def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
             progress: bool = True) -> Path:
     """Run (or continue) the end-to-end job and return the report's path.
@@ -329,7 +334,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
     from .executor import Executor, task_seeds
 
     config = (config or RunConfig()).validated()
-    root = Path(out) if out is not None else Path("runs") / config.name
+    root = run_folder(config, out)
     root.mkdir(parents=True, exist_ok=True)
     run_json = root / "run.json"
     cfg = asdict(config)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 
 def register(subparsers) -> None:
@@ -29,13 +30,20 @@ def register(subparsers) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from graspsim.pipeline import load_config, resume_job, run_job
+    from graspsim.pipeline import load_config, resume_job, run_folder, run_job
 
     if args.resume:
-        report = resume_job(args.resume)
+        folder = args.resume
     else:
         config = load_config(args.config, quick=args.quick, name=args.name, seed=args.seed,
                              backend=args.backend, address=args.address, jobs=args.jobs)
-        report = run_job(config, out=args.out)
+        folder = run_folder(config, args.out)
+    try:
+        report = resume_job(folder) if args.resume else run_job(config, out=folder)
+    except KeyboardInterrupt:
+        # Finished stages and trials are on disk: say how to go on, not where Python was.
+        print(f"graspsim run: interrupted; what was finished is saved, continue with "
+              f"`graspsim run --resume {folder}`", file=sys.stderr)
+        return 130
     print(f"report: {report} (and {report.with_suffix('.html')})")
     return 0

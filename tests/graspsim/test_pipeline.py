@@ -113,6 +113,32 @@ def test_other_configuration_in_the_same_folder_is_refused(tiny_run, tmp_path, m
     assert pipeline.resume_job(copy, progress=False).exists()
 
 
+def test_ctrl_c_says_how_to_continue_in_one_line(tmp_path, monkeypatch, capsys):
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    def run_cli(argv):  # an interrupt that escapes would stop the whole test session
+        try:
+            return main(argv)
+        except KeyboardInterrupt:
+            pytest.fail("KeyboardInterrupt escaped graspsim's main")
+
+    monkeypatch.setattr("graspsim.pipeline.run_job", interrupted)
+    monkeypatch.setattr("graspsim.pipeline.resume_job", interrupted)
+    assert run_cli(["run", "--quick", "--out", str(tmp_path / "r")]) == 130
+    err = capsys.readouterr().err.strip()
+    assert err == (f"graspsim run: interrupted; what was finished is saved, continue with "
+                   f"`graspsim run --resume {tmp_path / 'r'}`")
+    assert run_cli(["run", "--quick", "--name", "mine"]) == 130
+    assert "`graspsim run --resume runs/mine`" in capsys.readouterr().err
+    assert run_cli(["run", "--resume", str(tmp_path / "r")]) == 130
+    assert f"--resume {tmp_path / 'r'}`" in capsys.readouterr().err
+    # any other command: one line, no traceback
+    monkeypatch.setattr("graspsim.compare.compare_folders", interrupted)
+    assert run_cli(["compare", "a", "b"]) == 130
+    assert capsys.readouterr().err.strip() == "graspsim compare: interrupted"
+
+
 def test_config_files_and_bad_settings(tmp_path):
     toml = tmp_path / "c.toml"
     toml.write_text('[run]\nname = "x"\nscenes = 7\nbaselines = ["random"]\n')
