@@ -209,30 +209,31 @@ def recognition_data(
         keep[:] = False
         keep[np.random.default_rng(subset_random_state).choice(total, max_rectangles,
                                                                replace=False)] = True
-    chosen, start = [], 0  # (sample, its kept rectangles, their labels) per image
+    n = int(keep.sum())
+    images = masks = None  # filled in place: concatenating would hold the set twice
+    labels, image_ids, object_ids, kept = [], [], [], []
+    start = at = 0
     for s, rects, y in labelled:
         sel = np.flatnonzero(keep[start:start + len(rects)])
         start += len(rects)
-        if sel.size:
-            chosen.append((s, [rects[i] for i in sel], y[sel]))
-    n = int(keep.sum())
-    images = masks = None  # filled in place: concatenating would hold the set twice
-    image_ids, object_ids = [], []
-    at = 0
-    for s, rects, _ in chosen:
-        im, mk = rectangle_images(s.rgb, s.depth, s.depth_valid, rects, size=size)
+        if not sel.size:
+            continue
+        chosen = [rects[i] for i in sel]
+        im, mk = rectangle_images(s.rgb, s.depth, s.depth_valid, chosen, size=size)
         if images is None:
             images = np.empty((n, *im.shape[1:]), dtype=im.dtype)
             masks = np.empty((n, *mk.shape[1:]), dtype=mk.dtype)
-        images[at:at + len(rects)] = im
-        masks[at:at + len(rects)] = mk
-        at += len(rects)
-        image_ids += [s.image_id] * len(rects)
-        object_ids += [s.object_id] * len(rects)
+        images[at:at + sel.size] = im
+        masks[at:at + sel.size] = mk
+        at += sel.size
+        labels.append(y[sel])
+        kept.append(rects_to_array(chosen))
+        image_ids += [s.image_id] * sel.size
+        object_ids += [s.object_id] * sel.size
     return RecognitionData(
-        images, masks, np.concatenate([y for _, _, y in chosen]),
+        images, masks, np.concatenate(labels),
         np.asarray(image_ids, dtype=object), np.asarray(object_ids, dtype=object),
-        np.concatenate([rects_to_array(rects) for _, rects, _ in chosen]),
+        np.concatenate(kept),
     )
 
 
