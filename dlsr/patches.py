@@ -208,13 +208,12 @@ def sample_patches(
     d = p * p * C
     need = min_valid * d - 1e-9
 
-    if rows is None:
-        counts = masks.sum(axis=3, dtype=np.int32)
-    else:  # in chunks: masks[rows] whole would be the copy that rows avoids
-        counts = np.empty((len(rows), S, S2), dtype=np.int32)
-        for start in range(0, len(rows), _ROW_CHUNK):
-            sel = rows[start:start + _ROW_CHUNK]
-            counts[start:start + len(sel)] = masks[sel].sum(axis=3, dtype=np.int32)
+    m = n if rows is None else len(rows)
+    counts = np.empty((m, S, S2), dtype=np.int32)
+    for start in range(0, m, _ROW_CHUNK):  # in chunks: masks[rows] would copy what rows avoids
+        stop = min(start + _ROW_CHUNK, m)
+        sel = slice(start, stop) if rows is None else rows[start:stop]
+        counts[start:stop] = masks[sel].sum(axis=3, dtype=np.int32)
     win = sliding_window_view(counts, (p, p), axis=(1, 2)).sum(axis=(3, 4))  # (n, G1, G2)
     cand = np.flatnonzero(win.ravel() >= need)
     if extra is not None:
