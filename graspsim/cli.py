@@ -8,9 +8,12 @@ call directly.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
+import signal
 import sys
+import threading
 
 # Subcommand modules, in the order `graspsim --help` lists them.
 COMMANDS = [
@@ -38,6 +41,39 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived (``kill``, a batch scheduler's cancel or time limit).
+
+    A :class:`KeyboardInterrupt`, so that it unwinds as Ctrl-C does: joblib stops the loky
+    workers, Ray is shut down, files being written are closed. Left to Python's default, SIGTERM
+    ends the main process at once and leaves its loky workers running until their idle timeout.
+    """
+
+
+def stop_reason(exc: KeyboardInterrupt) -> tuple[str, int]:
+    """``("terminated", 143)`` for :class:`Terminated`, else ``("interrupted", 130)``: the word a
+    command prints and its exit code (the shell's 128 + signal number)."""
+    return ("terminated", 143) if isinstance(exc, Terminated) else ("interrupted", 130)
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+@contextlib.contextmanager
+def _sigterm_unwinds():
+    """SIGTERM raises :class:`Terminated` inside the block (main thread only); the previous
+    handler is restored after it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -46,7 +82,8 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
     try:
-        result = args.func(args)
+        with _sigterm_unwinds():
+            result = args.func(args)
     except (FileNotFoundError, ValueError) as exc:
         # Bad input is reported in one line naming the file or item, not as a stack trace.
         return _error(args.command, exc)
@@ -54,9 +91,10 @@ def main(argv: list[str] | None = None) -> int:
         if exc.filename is None:  # not about a file the user gave: a real failure
             raise
         return _error(args.command, exc)  # a folder given as a file, no permission, ...
-    except KeyboardInterrupt:  # Ctrl-C: one line, the shell's code for SIGINT
-        print(f"graspsim {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM: one line, the shell's exit code
+        word, code = stop_reason(exc)
+        print(f"graspsim {args.command}: {word}", file=sys.stderr)
+        return code
     return int(result or 0)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -117,9 +118,13 @@ class Executor:
 
         with self.activate(), tqdm(total=total, desc=desc, disable=not self.progress) as bar:
             if self.backend != "ray":
-                for result in Parallel(return_as="generator")(calls(tasks)):
-                    bar.update(1)
-                    yield result
+                outputs = Parallel(return_as="generator")(calls(tasks))
+                try:
+                    for result in outputs:
+                        bar.update(1)
+                        yield result
+                finally:
+                    _close_quietly(outputs)
                 return
             # Ray's joblib backend has no generator output: stream chunk by chunk so finished
             # work still reaches the caller (and disk) before the whole map ends.
@@ -135,3 +140,17 @@ class Executor:
     def map(self, fn: Callable[..., Any], tasks, desc: str = "tasks", star: bool = False):
         """``list(self.imap(...))``."""
         return list(self.imap(fn, tasks, desc=desc, star=star))
+
+
+def _close_quietly(outputs) -> None:
+    """Close a joblib output generator, also one its caller left early.
+
+    Leaving early (an error, Ctrl-C or SIGTERM while the caller handled a result) cancels the
+    pending tasks and stops the workers; joblib then warns that tasks were cancelled and suggests
+    a shorter task list, advice meant for a loop that breaks on purpose, so the warning is
+    silenced here. Closing a generator that ran to its end does nothing.
+    """
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*adjusting the input task iterator",
+                                category=UserWarning)
+        outputs.close()

@@ -30,6 +30,7 @@ def register(subparsers) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
+    from graspsim.cli import stop_reason
     from graspsim.pipeline import load_config, resume_job, run_folder, run_job
 
     if args.resume:
@@ -40,10 +41,11 @@ def _main(args: argparse.Namespace) -> int:
         folder = run_folder(config, args.out)
     try:
         report = resume_job(folder) if args.resume else run_job(config, out=folder)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (graspsim.cli.Terminated)
         # Finished stages and trials are on disk: say how to go on, not where Python was.
-        print(f"graspsim run: interrupted; what was finished is saved, continue with "
+        word, code = stop_reason(exc)
+        print(f"graspsim run: {word}; what was finished is saved, continue with "
               f"`graspsim run --resume {folder}`", file=sys.stderr)
-        return 130
+        return code
     print(f"report: {report} (and {report.with_suffix('.html')})")
     return 0

@@ -1,0 +1,89 @@
+"""The ``graspsim`` entry point: SIGTERM (a batch scheduler's cancel or time limit) unwinds as
+Ctrl-C does."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from graspsim.cli import main
+from graspsim.executor import Executor
+
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+
+
+@pytest.fixture
+def sigterm_caught_here():
+    """A SIGTERM that graspsim does not handle is recorded here instead of ending pytest."""
+    seen = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: seen.append(signum))
+    yield seen
+    signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate_self(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGTERM)
+    end = time.monotonic() + 10.0  # a handler that raises ends this loop at once
+    while time.monotonic() < end:
+        time.sleep(0.01)
+    return 0
+
+
+def test_sigterm_ends_a_command_in_one_line(monkeypatch, capsys, sigterm_caught_here):
+    handler = signal.getsignal(signal.SIGTERM)
+    monkeypatch.setattr("graspsim.compare.compare_folders", _terminate_self)
+    assert main(["compare", "a", "b"]) == 143
+    assert capsys.readouterr().err.strip() == "graspsim compare: terminated"
+    assert sigterm_caught_here == []  # graspsim's handler took it
+    assert signal.getsignal(signal.SIGTERM) is handler  # and gave the previous one back
+
+
+def test_sigterm_on_run_says_how_to_continue(tmp_path, monkeypatch, capsys,
+                                             sigterm_caught_here):
+    monkeypatch.setattr("graspsim.pipeline.run_job", _terminate_self)
+    assert main(["run", "--quick", "--out", str(tmp_path / "r")]) == 143
+    assert capsys.readouterr().err.strip() == (
+        f"graspsim run: terminated; what was finished is saved, continue with "
+        f"`graspsim run --resume {tmp_path / 'r'}`")
+
+
+def _pid_after(seconds):
+    time.sleep(seconds)
+    return os.getpid()
+
+
+def _running(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc (Linux)")
+def test_sigterm_stops_the_loky_workers(monkeypatch, capsys, sigterm_caught_here):
+    workers = set()
+
+    def busy(*args, **kwargs):
+        # Four short tasks, then long ones: SIGTERM comes while the workers run them.
+        tasks = [0.05] * 4 + [30.0] * 4
+        for i, pid in enumerate(Executor("loky", n_jobs=2, progress=False).imap(_pid_after,
+                                                                                 tasks)):
+            workers.add(pid)
+            if i == 3:
+                os.kill(os.getpid(), signal.SIGTERM)
+        return 0
+
+    monkeypatch.setattr("graspsim.compare.compare_folders", busy)
+    assert main(["compare", "a", "b"]) == 143
+    assert "terminated" in capsys.readouterr().err
+    assert workers and os.getpid() not in workers
+    deadline = time.monotonic() + 15.0
+    while any(_running(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_running(p) for p in workers), "loky workers still running after SIGTERM"
