@@ -32,7 +32,7 @@ test: $(TEST_STAMP)
 lint: $(TEST_STAMP)
 	$(BIN)/ruff check .
 
-# The numerical tests once per BLAS kernel set the CPU supports (OPENBLAS_CORETYPE=Prescott,
+# The whole test suite once per BLAS kernel set the CPU supports (OPENBLAS_CORETYPE=Prescott,
 # Haswell, SkylakeX where /proc/cpuinfo has avx512f) and once with numba's kernels compiled for
 # a generic CPU in a fresh cache; one line per configuration, non-zero exit if any fails.
 # PORTABILITY_ARGS: other test paths, and/or "-- PYTEST_ARGS". Not part of .ci/run.
