@@ -1,6 +1,10 @@
-"""Fixtures of the graspsim tests: a small saved DLSR model and its scene's image files."""
+"""Fixtures of the graspsim tests: a small saved DLSR model and its scene's image files, and
+what the tests of stopping parallel workers share."""
 
 from __future__ import annotations
+
+import os
+import time
 
 import numpy as np
 import pytest
@@ -83,3 +87,38 @@ def easy_objects():
     specs = [s for s in builtin_objects("all") if s.name in names]
     assert len(specs) >= 2, "built-in objects missing: run scripts/make_objects.py"
     return specs
+
+
+def _pid_after(seconds):
+    time.sleep(seconds)
+    return os.getpid()
+
+
+@pytest.fixture
+def pid_after():
+    """A task for a worker: sleeps ``seconds``, then returns the worker's process id."""
+    return _pid_after
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)  # signal 0: only asks whether the process exists
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@pytest.fixture
+def still_running():
+    """``still_running(pids, within=15.0)``: those of ``pids`` still running after waiting up to
+    ``within`` seconds for them to end (loky reaps the workers it stops)."""
+    def check(pids, within: float = 15.0) -> set:
+        deadline = time.monotonic() + within
+        while True:
+            alive = {p for p in pids if _alive(p)}
+            if not alive or time.monotonic() > deadline:
+                return alive
+            time.sleep(0.1)
+    return check

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import gc
-import os
-import time
 import warnings
 
 import numpy as np
@@ -62,21 +60,13 @@ def test_ray_matches_loky():
     assert ray_out == loky
 
 
-def _pid_after(seconds):
-    import os
-    import time
 
-    time.sleep(seconds)
-    return os.getpid()
-
-
-@pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="reads /proc (Linux)")
-def test_leaving_the_stream_early_stops_the_workers_quietly():
+def test_leaving_the_stream_early_stops_the_workers_quietly(pid_after, still_running):
     # An error while the caller handles a result (as Ctrl-C or SIGTERM there): the pending
     # tasks are cancelled and the loky workers stopped, without joblib's "tasks cancelled"
     # warning (an error under this suite's filterwarnings).
     workers = set()
-    stream = Executor("loky", n_jobs=2, progress=False).imap(_pid_after, [0.05] * 4 + [30.0] * 4)
+    stream = Executor("loky", n_jobs=2, progress=False).imap(pid_after, [0.05] * 4 + [30.0] * 4)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         with pytest.raises(RuntimeError, match="writing failed"):
@@ -87,15 +77,4 @@ def test_leaving_the_stream_early_stops_the_workers_quietly():
         del stream
         gc.collect()
     assert [str(w.message) for w in caught] == []
-    deadline = time.monotonic() + 15.0
-    while any(_running(p) for p in workers) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert workers and not any(_running(p) for p in workers)
-
-
-def _running(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
+    assert workers and not still_running(workers)
