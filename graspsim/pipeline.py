@@ -380,8 +380,8 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         # The rectangle images go to a file that the workers map (no copy per worker).
         mapped = root / "recognition" / "data"
         data = rec.recognition_data(samples, random_state=seeds["recognition"])
-        data = data.memory_mapped(mapped)
-        try:
+        try:  # the folder goes also when writing it fails (a full disk) or the CV stops
+            data = data.memory_mapped(mapped)
             with ex.activate():  # the CV folds run on the chosen backend (joblib inside dlsr)
                 summary = rec.run_recognition_benchmark(
                     data, root / "recognition", learners=[config.learner],
