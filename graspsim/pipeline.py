@@ -32,7 +32,8 @@ from dlsr.records import file_errors, read_json, write_json_atomic
 
 log = logging.getLogger(__name__)
 
-__all__ = ["RunConfig", "load_config", "run_folder", "run_job", "resume_job", "QUICK"]
+__all__ = ["RunConfig", "load_config", "run_folder", "run_job", "resume_job",
+           "objectwise_validation", "QUICK"]
 
 
 @dataclass
@@ -46,7 +47,15 @@ class RunConfig:
     seed : int
         Root seed; every stage derives its own from it.
     scenes : int
-        Synthetic Cornell images generated from the train objects.
+        Synthetic Cornell images generated from ``train_objects``.
+    train_objects, trial_objects : str
+        The objects of the dataset (and so of every model and offline benchmark) and of the
+        trials (:func:`graspsim.trials.resolve_objects`: ``"train"``, ``"test"``, ``"all"`` or
+        comma-separated names of built-in objects). Defaults: the built-in split, trials on the
+        held-out test objects. Object-wise validation trains on some train objects and runs
+        the trials on the others (:func:`graspsim.trials.object_folds`,
+        ``scripts/objectwise_validation.py``), so settings are chosen on objects the model has
+        not seen without touching the test objects.
     candidates : int
         Rectangles labelled by physics per scene.
     label_sampler : {"mixed", "dense"}
@@ -112,6 +121,8 @@ class RunConfig:
     name: str = "default"
     seed: int = 0
     scenes: int = 60
+    train_objects: str = "train"
+    trial_objects: str = "test"
     candidates: int = 64
     label_sampler: str = "dense"
     learner: str = "NKM"
@@ -160,6 +171,17 @@ class RunConfig:
         from .labelling import check_sampler
 
         check_sampler(self.label_sampler)
+        from .trials import resolve_objects
+
+        for name in ("train_objects", "trial_objects"):
+            value = getattr(self, name)
+            if not isinstance(value, str):
+                raise ValueError(f"{name} must be a string (train, test, all or comma-separated "
+                                 f"object names), got {value!r}")
+            try:
+                resolve_objects(value)
+            except ValueError as exc:
+                raise ValueError(f"{name}: {exc}") from None
         self._check_baselines()
         if self.scenes < self.folds:
             raise ValueError(f"{self.folds} folds need at least {self.folds} scenes")
@@ -358,14 +380,15 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
     stages = _Stages(root)
     t_start = time.perf_counter()
 
-    # 1. Synthetic Cornell dataset from the train objects.
+    # 1. Synthetic Cornell dataset from the train objects (config.train_objects).
     if not stages.done("dataset"):
         from .datagen import make_dataset
 
         t0 = time.perf_counter()
-        stats = make_dataset(n_scenes=config.scenes, objects="train", out=root / "dataset",
-                             seed=seeds["dataset"], n_candidates=config.candidates,
-                             sampler=config.label_sampler, executor=ex)
+        stats = make_dataset(n_scenes=config.scenes, objects=config.train_objects,
+                             out=root / "dataset", seed=seeds["dataset"],
+                             n_candidates=config.candidates, sampler=config.label_sampler,
+                             executor=ex)
         stats["seconds"] = time.perf_counter() - t0
         stages.finish("dataset", stats)
     from dlsr.datasets import load_cornell
@@ -442,7 +465,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         stages.finish(key, {"paths": [str(p) for p in paths],
                             "seconds": time.perf_counter() - t0})
 
-    # 5. Simulated grasp trials on the held-out test objects.
+    # 5. Simulated grasp trials on the held-out test objects (config.trial_objects).
     trial_stage(root, config, stages, model_path, seeds["trials"], ex, progress)
 
     # 6. The report.
@@ -461,7 +484,8 @@ def _cpus() -> int:
 
 def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: int, executor,
                 progress: bool = True) -> None:
-    """Stage 5: simulated grasp trials of DLSR and ``config.baselines`` on the test objects.
+    """Stage 5: simulated grasp trials of DLSR and ``config.baselines`` on
+    ``config.trial_objects`` (default: the held-out test objects).
 
     Each detector's trials go to ``root / "trials" / name`` (resumed trial by trial) and its
     summary into ``stages`` as ``"trials/<name>"`` once finished. A baseline may be any name
@@ -477,7 +501,7 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
             continue
         t0 = time.perf_counter()
         det = _trial_detector(name, model_path, config)
-        s = run_trials(det, objects="test", n=config.trials, seed=seed,
+        s = run_trials(det, objects=config.trial_objects, n=config.trials, seed=seed,
                        out=root / "trials" / name, config=trial_cfg, executor=executor,
                        progress=progress, detector_name=name)
         s.pop("records", None)
@@ -536,3 +560,98 @@ def resume_job(folder, progress: bool = True) -> Path:
     config = RunConfig(**_settings(recorded["config"], f"run record {run_json} config"))
     config = config.validated()
     return run_job(config, out=folder, resume=True, progress=progress)
+
+
+def objectwise_validation(config: RunConfig | None = None, n_folds: int = 3, fold_seed: int = 0,
+                          out=None, progress: bool = True) -> dict:
+    """Object-wise validation of a run configuration: trials on train objects it never saw.
+
+    ``config.train_objects`` (default: the built-in train objects) is split into ``n_folds``
+    object folds (:func:`graspsim.trials.object_folds`); for each fold the whole job runs
+    (:func:`run_job`: dataset, CV, models, trials of DLSR and the baselines) with the other
+    folds' objects as its train objects and the fold's as its trial objects. The trials of
+    all folds are then pooled, detector by detector, and DLSR is compared with each other
+    detector scene by scene (exact McNemar, :func:`graspsim.compare.compare_outcomes`). The
+    test objects are never used: this is where settings are chosen. Each fold's run is
+    resumed like any run.
+
+    Parameters
+    ----------
+    config : RunConfig or None
+        The configuration to validate (defaults when None); its ``trial_objects`` is not used.
+    n_folds : int
+        Object folds (at least 2).
+    fold_seed : int
+        Seed of the split into folds.
+    out : str or Path or None
+        Folder of the fold runs and the summary (default ``runs/<config.name>-objectwise``).
+    progress : bool
+        Progress bars.
+
+    Returns
+    -------
+    dict
+        ``folds`` (per fold: ``objects``, ``run`` folder and per-detector ``successes`` /
+        ``n``), ``detectors`` (pooled :func:`graspsim.trials.summarize` of each detector, DLSR
+        first, without the per-trial records), ``comparisons`` (DLSR against each other
+        detector), ``folder``. Also written to ``objectwise.json`` and ``objectwise.md``.
+    """
+    from .compare import compare_outcomes, load_folder
+    from .trials import object_folds, summarize
+
+    config = (config or RunConfig()).validated()
+    folds = object_folds(config.train_objects, n_folds, fold_seed)
+    root = Path(out) if out is not None else Path("runs") / f"{config.name}-objectwise"
+    names = trial_names(config)
+    pooled: dict[str, list] = {name: [] for name in names}
+    fold_info = []
+    for k, fold in enumerate(folds):
+        others = [n for j, f in enumerate(folds) if j != k for n in f]
+        cfg = dataclasses.replace(config, name=f"{config.name}-fold{k}",
+                                  train_objects=",".join(others), trial_objects=",".join(fold))
+        folder = root / f"fold{k}"
+        log.info("object fold %d of %d: trials on %s", k + 1, len(folds), ", ".join(fold))
+        run_job(cfg.validated(), out=folder, resume=True, progress=progress)
+        info = {"objects": fold, "run": str(folder), "detectors": {}}
+        for name in names:
+            recs = load_folder(folder / "trials" / name)["records"]
+            pooled[name].extend(recs[i] for i in sorted(recs))
+            info["detectors"][name] = {"successes": sum(bool(r["success"])
+                                                        for r in recs.values()),
+                                       "n": len(recs)}
+        fold_info.append(info)
+    detectors = {name: summarize(pooled[name]) for name in names}
+    dlsr = [bool(r["success"]) for r in pooled["dlsr"]]
+    comparisons = []
+    for name in names[1:]:
+        c = compare_outcomes(dlsr, [bool(r["success"]) for r in pooled[name]],
+                             names=("dlsr", name))
+        comparisons.append({"a": "dlsr", "b": name, **c})
+    result = {"config": asdict(config), "n_folds": len(folds), "fold_seed": fold_seed,
+              "folds": fold_info, "detectors": detectors, "comparisons": comparisons,
+              "folder": str(root)}
+    write_json_atomic(root / "objectwise.json", result)
+    (root / "objectwise.md").write_text(objectwise_markdown(result))
+    return result
+
+
+def objectwise_markdown(result: dict) -> str:
+    """:func:`objectwise_validation`'s result as a short Markdown summary."""
+    det = result["detectors"]
+    lines = [f"# Object-wise validation: {result['n_folds']} folds of the train objects "
+             f"(fold seed {result['fold_seed']})", "",
+             "| detector | success | 95 % CI (Wilson) | on graspable objects | "
+             + " | ".join(f"fold {k}" for k in range(result["n_folds"])) + " |",
+             "|---|---|---|---|" + "---|" * result["n_folds"]]
+    for name, s in det.items():
+        g = s["graspable_success_rate"]
+        per = [f"{f['detectors'][name]['successes']}/{f['detectors'][name]['n']}"
+               for f in result["folds"]]
+        lines.append(f"| {name} | {s['successes']}/{s['n']} | {100 * s['success_ci95'][0]:.1f}"
+                     f" - {100 * s['success_ci95'][1]:.1f} % | "
+                     f"{'n/a' if g is None else f'{100 * g:.1f} %'} | " + " | ".join(per) + " |")
+    lines += ["", "Paired, pooled over the folds:", ""]
+    lines += [f"- {c['verdict']}" for c in result["comparisons"]]
+    lines += ["", "Folds (trial objects):", ""]
+    lines += [f"- fold {k}: {', '.join(f['objects'])}" for k, f in enumerate(result["folds"])]
+    return "\n".join(lines) + "\n"

@@ -185,6 +185,17 @@ def _save(fig, path) -> Path:
     return path
 
 
+def _objects_phrase(objects: str) -> str:
+    """How the report names a run's ``train_objects`` or ``trial_objects`` setting."""
+    if objects in ("train", "test", "all"):
+        return {"train": "the built-in train objects", "test": "the held-out test objects",
+                "all": "all built-in objects"}[objects]
+    from .trials import resolve_objects
+
+    names = [s.name for s in resolve_objects(objects)]
+    return f"{len(names)} built-in object{'s' if len(names) > 1 else ''} ({', '.join(names)})"
+
+
 def _finite_ci(ci) -> bool:
     return ci is not None and all(v is not None and v == v for v in ci)
 
@@ -210,7 +221,7 @@ def plot_success_rates(summaries: dict, path) -> Path:
     if not names:
         raise ValueError("no trial summaries to plot")
     fig, ax = plt.subplots(figsize=(8, 1.2 + 0.7 * len(names)))
-    series = (("all test objects", "", "o", "tab:blue", -0.15),
+    series = (("all objects", "", "o", "tab:blue", -0.15),
               ("graspable objects only", "graspable_", "s", "tab:orange", 0.15))
     for label, pre, marker, color, dy in series:
         ys, xs, lo, hi, texts = [], [], [], [], []
@@ -441,8 +452,9 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
     combo = f"{config.learner}-{config.encoder}"
     blocks: list[tuple] = [("h1", f"graspsim run: {config.name}")]
     blocks.append(("p", f"DLSR {combo} (d = {config.n_atoms}) trained on {config.scenes} "
-                        f"synthetic Cornell images of the built-in train objects; simulated "
-                        f"grasp trials on the held-out test objects. Seed {config.seed}."
+                        f"synthetic Cornell images of {_objects_phrase(config.train_objects)}; "
+                        f"simulated grasp trials on {_objects_phrase(config.trial_objects)}. "
+                        f"Seed {config.seed}."
                    + (f" Wall time {wall / 60:.1f} min." if wall else "")))
     training = ("the paper's training (labelled rectangles only)" if not config.grid_negatives
                 else f"{config.grid_negatives:g} negative(s) per labelled rectangle from its "
@@ -493,7 +505,8 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
         blocks.append(("p", "Detection table (layout of the paper's Table 2):"))
         blocks.append(("md", f.read_text()))
 
-    blocks.append(("h2", "Physical grasp success on the test objects"))
+    blocks.append(("h2", "Physical grasp success on the "
+                         + ("test objects" if config.trial_objects == "test" else "trial objects")))
     from .pipeline import trial_names
 
     names = trial_names(config)

@@ -64,6 +64,7 @@ __all__ = [
     "summarize",
     "wilson_interval",
     "resolve_objects",
+    "object_folds",
     "trial_streams",
     "observation",
     "propose",
@@ -150,6 +151,36 @@ def resolve_objects(objects) -> list[ObjectSpec]:
     if not specs:
         raise ValueError(f"no objects in {objects!r}")
     return specs
+
+
+def object_folds(objects="train", n_folds: int = 3, seed: int = 0) -> list[list[str]]:
+    """Object-wise folds: ``objects`` split at random into ``n_folds`` disjoint groups.
+
+    For choosing a detector's settings on objects its model has not seen without touching the
+    test objects: train on every fold but one, run trials on that one (``RunConfig``'s
+    ``train_objects`` / ``trial_objects``; ``scripts/objectwise_validation.py``).
+
+    Parameters
+    ----------
+    objects : str or list of ObjectSpec
+        As :func:`resolve_objects` (default: the built-in train objects).
+    n_folds : int
+        Between 2 and the number of objects.
+    seed : int
+        The split's seed (the same seed gives the same folds).
+
+    Returns
+    -------
+    list of list of str
+        Object names per fold, each in the built-in order; fold sizes differ by at most one.
+    """
+    names = [s.name for s in resolve_objects(objects)]
+    if isinstance(n_folds, bool) or not isinstance(n_folds, (int, np.integer)) or not (
+            2 <= n_folds <= len(names)):
+        raise ValueError(f"n_folds must be an integer between 2 and the {len(names)} objects, "
+                         f"got {n_folds!r}")
+    perm = np.random.default_rng(seed).permutation(len(names))
+    return [[names[i] for i in sorted(perm[k::n_folds])] for k in range(int(n_folds))]
 
 
 def trial_streams(seed: int, index: int) -> dict:

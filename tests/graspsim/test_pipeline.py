@@ -18,6 +18,9 @@ TINY = {
     "name": "tiny", "scenes": 6, "candidates": 12, "n_atoms": 8, "n_patches": 6000, "folds": 2,
     "inner_folds": 2, "trials": 3, "trial_candidates": 8, "baselines": ["mask-pca"],
     "detection_images": 4, "jobs": 1, "fit_grid": 0.05,
+    # a few named objects, the trial objects held out (as in object-wise validation)
+    "train_objects": "mug_classic,can_soda,box_small,block_t,wooden_spoon",
+    "trial_objects": "box_tea,bowl_small",
 }
 
 
@@ -35,12 +38,17 @@ def test_run_writes_every_stage_and_the_report(tiny_run):
     assert set(stages) == {"dataset", "recognition", "detection", "model", "model-paper",
                            "trials/dlsr", "trials/dlsr-paper", "trials/mask-pca"}
     assert stages["dataset"]["images"] == 6
+    seen = {line.split()[1] for line in (out / "dataset" / "image_objects.txt").read_text()
+            .splitlines() if not line.startswith("#")}
+    assert seen <= set(TINY["train_objects"].split(","))
     assert 0.0 <= stages["recognition"]["accuracy"] <= 1.0
     assert not (out / "recognition" / "data").exists()  # the workers' mapped copy is removed
     for name in ("dlsr", "dlsr-paper", "mask-pca"):
         s = stages[f"trials/{name}"]
         assert s["n"] == 3 and 0 <= s["successes"] <= 3
-        assert len((out / "trials" / name / "trials.jsonl").read_text().splitlines()) == 3
+        lines = (out / "trials" / name / "trials.jsonl").read_text().splitlines()
+        assert len(lines) == 3
+        assert {json.loads(t)["object"][0] for t in lines} <= set(TINY["trial_objects"].split(","))
     run = json.loads((out / "run.json").read_text())
     assert run["config"]["scenes"] == 6 and "numpy" in run["versions"]
     # the detector training options reach the detection benchmark and the final model
@@ -55,6 +63,8 @@ def test_run_writes_every_stage_and_the_report(tiny_run):
     paper = json.loads((out / "model" / "dlsr-paper.json").read_text())
     assert "physical" not in paper and paper["config"]["detector"] == "dense"
     md = report.read_text()
+    assert "5 built-in objects (mug_classic, can_soda, box_small, wooden_spoon, block_t)" in md
+    assert "trials on 2 built-in objects (box_tea, bowl_small)" in md
     assert "Physical grasp success" in md and "| dlsr |" in md and "| mask-pca |" in md
     assert "| dlsr-paper |" in md and "gripper-aware" in md and "physical features" in md
     assert "DLSR against each baseline, scene by scene" in md and "| mask-pca | 3 |" in md
@@ -165,6 +175,57 @@ def test_config_files_and_bad_settings(tmp_path):
     with pytest.raises(FileNotFoundError):
         pipeline.load_config(tmp_path / "absent.toml")
     assert main(["run", "--resume", str(tmp_path / "nothing")]) == 2
+    with pytest.raises(ValueError, match="trial_objects: no built-in object named teapot"):
+        pipeline.load_config(trial_objects="brush,teapot")
+    with pytest.raises(ValueError, match="train_objects must be a string"):
+        pipeline.load_config(train_objects=["brush"])
+
+
+def test_objectwise_validation_runs_every_fold_and_pools_the_trials(tmp_path, monkeypatch):
+    """Each fold's run trains on the other folds' objects and tries its own; the pooled
+    comparison is that of every trial of every fold (a stand-in for run_job writes the
+    trial folders)."""
+    runs = []
+
+    def fake_run_job(config, out, resume=True, progress=True):
+        runs.append(config)
+        train, trial = config.train_objects.split(","), config.trial_objects.split(",")
+        for name in pipeline.trial_names(config):
+            d = out / "trials" / name
+            d.mkdir(parents=True)
+            (d / "config.json").write_text(json.dumps({"detector": name}))
+            # DLSR succeeds on the first trial object's scenes, mask-pca on every scene
+            recs = [{"index": i, "object": [trial[i % len(trial)]], "graspable": True,
+                     "success": name == "mask-pca" or (name == "dlsr" and i % len(trial) == 0)}
+                    for i in range(4)]
+            for r in recs:
+                r["reason"] = None if r["success"] else "collision on approach"
+            (d / "trials.jsonl").write_text("".join(json.dumps(r) + "\n" for r in recs))
+        assert not set(train) & set(trial)
+        return out / "report.md"
+
+    monkeypatch.setattr(pipeline, "run_job", fake_run_job)
+    objects = "mug_classic,can_soda,box_small,block_t,wooden_spoon"
+    config = pipeline.load_config(name="v", train_objects=objects, baselines=["mask-pca"],
+                                  gripper_aware=False, physical=False, detector="dense")
+    result = pipeline.objectwise_validation(config, n_folds=2, fold_seed=1, out=tmp_path)
+    assert len(runs) == 2 and [r.name for r in runs] == ["v-fold0", "v-fold1"]
+    tried = [r.trial_objects.split(",") for r in runs]
+    assert sorted(tried[0] + tried[1]) == sorted(objects.split(","))
+    for r, t in zip(runs, tried, strict=True):
+        assert sorted(r.train_objects.split(",") + t) == sorted(objects.split(","))
+    det = result["detectors"]
+    assert det["mask-pca"]["successes"] == 8 and det["mask-pca"]["n"] == 8
+    dlsr_ok = sum(len(range(0, 4, len(t))) for t in tried)  # i % len(trial) == 0, i < 4
+    assert det["dlsr"]["successes"] == dlsr_ok
+    (c,) = result["comparisons"]
+    assert c["b"] == "mask-pca" and c["counts"]["only_b"] == 8 - dlsr_ok
+    assert c["counts"]["only_a"] == 0 and c["n"] == 8
+    saved = json.loads((tmp_path / "objectwise.json").read_text())
+    assert saved["detectors"]["dlsr"]["successes"] == dlsr_ok
+    assert "| mask-pca | 8/8 |" in (tmp_path / "objectwise.md").read_text()
+    with pytest.raises(ValueError, match="n_folds"):
+        pipeline.objectwise_validation(config, n_folds=6, out=tmp_path / "x")
 
 
 def test_report_html_renders_in_headless_chromium(tiny_run, tmp_path):

@@ -223,3 +223,21 @@ def test_objects_by_name_keep_the_built_in_order_and_name_the_unknown():
         resolve_objects(f"{a},teapot")
     with pytest.raises(ValueError, match="no objects"):
         resolve_objects(" , ")
+
+
+def test_object_folds_partition_the_objects_reproducibly():
+    from graspsim.objects import builtin_objects
+    from graspsim.trials import object_folds
+
+    train = [s.name for s in builtin_objects("train")]
+    folds = object_folds("train", 3, seed=5)
+    assert sorted(n for f in folds for n in f) == sorted(train)  # every object, once
+    assert max(map(len, folds)) - min(map(len, folds)) <= 1
+    assert all(f == sorted(f, key=train.index) for f in folds)  # built-in order
+    assert object_folds("train", 3, seed=5) == folds
+    assert object_folds("train", 3, seed=6) != folds
+    four = train[:4]
+    assert sorted(map(len, object_folds(",".join(four), 4))) == [1, 1, 1, 1]
+    for bad in (1, 5, 2.5, True):
+        with pytest.raises(ValueError, match="n_folds must be an integer between 2 and the 4"):
+            object_folds(",".join(four), bad)
