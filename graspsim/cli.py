@@ -61,7 +61,7 @@ def _terminate(signum, frame):
 
 
 @contextlib.contextmanager
-def _sigterm_unwinds():
+def sigterm_unwinds():
     """SIGTERM raises :class:`Terminated` inside the block (main thread only); the previous
     handler is restored after it."""
     if threading.current_thread() is not threading.main_thread():
@@ -82,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
     )
     try:
-        with _sigterm_unwinds():
+        with sigterm_unwinds():
             result = args.func(args)
     except (FileNotFoundError, ValueError) as exc:
         # Bad input is reported in one line naming the file or item, not as a stack trace.

@@ -18,8 +18,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 
+from graspsim.cli import sigterm_unwinds, stop_reason
 from graspsim.pipeline import load_config, objectwise_validation
 
 
@@ -32,16 +34,20 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=None, help="output folder (default "
                    "runs/<name>-objectwise)")
     args = p.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
         config = load_config(args.config, quick=args.quick)
-        result = objectwise_validation(config, n_folds=args.folds, fold_seed=args.fold_seed,
-                                       out=args.out, progress=sys.stderr.isatty())
+        with sigterm_unwinds():  # kill / scancel stop the workers too, as Ctrl-C does
+            result = objectwise_validation(config, n_folds=args.folds,
+                                           fold_seed=args.fold_seed, out=args.out,
+                                           progress=sys.stderr.isatty())
     except (ValueError, FileNotFoundError) as exc:
         print(f"objectwise_validation: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("objectwise_validation: interrupted; the same command continues", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        word, code = stop_reason(exc)
+        print(f"objectwise_validation: {word}; the same command continues", file=sys.stderr)
+        return code
     keep = ("successes", "n", "success_rate", "success_ci95", "graspable_success_rate")
     print(json.dumps({
         "folder": result["folder"],

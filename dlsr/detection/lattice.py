@@ -127,7 +127,8 @@ def lattice_step(jaw_px=(10.0, 28.0), spacing: float | None = None) -> tuple[lis
 def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | None,
                        jaw_px=(10.0, 28.0), spacing: float | None = None, n_angles: int = 12,
                        margin_px: float = 4.0, depth_band: float = 0.02, reach: float = 0.95,
-                       seen: set | None = None) -> list[GraspRectangle]:
+                       seen: set | None = None,
+                       widest_in_reach: bool = False) -> list[GraspRectangle]:
     """Rectangles fitted to one object mask (see the module docstring).
 
     Parameters
@@ -148,6 +149,13 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
     seen : set or None
         Keys of candidates already generated (shared across the objects of a scene);
         updated in place.
+    widest_in_reach : bool
+        Where a chord's wide opening (``1.3 * length + 2 * margin_px``) is beyond the reach but
+        its tight one (``length + margin_px``) is not, add the widest opening within the reach
+        in its place (``max_opening`` only): an object nearly as wide as the gripper's reach
+        then also gets the candidate with all the clearance the gripper has, not only the
+        tight one. Not the default (validation scenes of the training objects, README: ahead
+        on objects the model had not seen, not separated over all validation scenes).
 
     Returns
     -------
@@ -202,7 +210,10 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
                 c = c + (x0, y0)
                 w_max = (np.inf if max_opening is None else
                          reach * float(_max_width_px(z, th, K, max_opening)))
-                for w in (length + margin_px, 1.3 * length + 2 * margin_px):
+                widths = [length + margin_px, 1.3 * length + 2 * margin_px]
+                if widest_in_reach and widths[0] <= w_max < widths[1]:
+                    widths[1] = w_max
+                for w in widths:
                     if w > w_max:
                         continue
                     for h in jaws:
@@ -269,6 +280,9 @@ class LatticeDetector:
         features always measure): the tops of dark, specular and transparent objects, which
         the sensor hardly returns, otherwise leave islands too narrow for any opening that
         spans the object. Chosen on validation scenes of the training objects (README).
+    widest_in_reach : bool
+        Also the widest opening within the reach where a chord's wide opening is beyond it
+        (:func:`lattice_candidates`; not the default, README).
     n_threads : int or None
         Threads of the exact scoring (None: the CPUs available).
     """
@@ -279,7 +293,7 @@ class LatticeDetector:
                  spacing: float | None = None, n_angles: int = 12, margin_px: float = 4.0,
                  depth_band: float = 0.02, reach: float = 0.95, seed: int = 0,
                  fill_holes: bool = True, complete: bool = True,
-                 n_threads: int | None = None):
+                 widest_in_reach: bool = False, n_threads: int | None = None):
         self.model = model
         self.top_k = top_k
         self.region = region
@@ -296,6 +310,7 @@ class LatticeDetector:
         self.seed = seed
         self.fill_holes = fill_holes
         self.complete = complete
+        self.widest_in_reach = widest_in_reach
         self.n_threads = n_threads
 
     def candidates(self, obs):
@@ -322,7 +337,8 @@ class LatticeDetector:
             dep = _fill_region_holes(dep, valid, laid)
         rects = lattice_candidates(laid, dep, obs.get("K"), offset,
                                    self.max_width, self.jaw_px, self.spacing, self.n_angles,
-                                   self.margin_px, self.depth_band, self.reach)
+                                   self.margin_px, self.depth_band, self.reach,
+                                   widest_in_reach=self.widest_in_reach)
         cand = np.array([r.as_array() for r in rects], dtype=float).reshape(-1, 5)
         if self.budget is not None and len(cand) > self.budget:
             cand = cand[np.sort(rng.choice(len(cand), size=int(self.budget), replace=False))]
