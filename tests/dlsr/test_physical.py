@@ -128,6 +128,34 @@ def test_lattice_candidates_fit_the_object_and_the_reach():
     assert lattice_candidates(np.zeros((H, W), bool), obs["depth"], K, np.zeros(2), None) == []
 
 
+def test_widest_in_reach_adds_the_opening_with_all_the_clearance_the_gripper_has():
+    """The bar's chord across it is 15 px: a tight opening of 19 px and a wide one of 27.5 px,
+    beyond the reach of a 10 cm gripper at 0.77 m (0.95 x 26 px); the option adds the widest
+    opening in reach instead of nothing."""
+    obs = _scene()
+
+    def across(**kw):
+        rects = lattice_candidates(obs["mask"], obs["depth"], K, np.zeros(2), max_opening=0.1,
+                                   **kw)
+        A = np.array([r.as_array() for r in rects])
+        return A, A[np.isclose(np.abs(np.sin(A[:, 2])), 1.0)]
+
+    reach = 0.95 * float(max_width_px(0.77, np.pi / 2, K, 0.1))
+    assert 19.0 < reach < 27.5
+    plain, plain_across = across()
+    wide, wide_across = across(widest_in_reach=True)
+    assert np.allclose(plain_across[:, 3], 19.0)
+    assert np.isclose(wide_across[:, 3], 19.0).any()
+    assert np.isclose(wide_across[:, 3], reach).any() and (wide_across[:, 3] <= reach).all()
+    # every plain candidate is still there; only openings in reach were added
+    assert {tuple(r) for r in plain.round(6)} <= {tuple(r) for r in wide.round(6)}
+    assert len(wide) > len(plain)
+    # without a reach there is nothing to add
+    a = lattice_candidates(obs["mask"], obs["depth"], K, np.zeros(2), None, widest_in_reach=True)
+    b = lattice_candidates(obs["mask"], obs["depth"], K, np.zeros(2), None)
+    assert np.array_equal([r.as_array() for r in a], [r.as_array() for r in b])
+
+
 @pytest.mark.parametrize("bad", [np.full((3, 3), np.nan), np.diag([-F, F, 1.0]), np.eye(2)])
 def test_the_reach_needs_a_valid_camera_matrix(bad):
     """With a NaN camera matrix every reach is NaN, and as comparisons with NaN are False every
