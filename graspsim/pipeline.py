@@ -571,9 +571,9 @@ def objectwise_validation(config: RunConfig | None = None, n_folds: int = 3, fol
     (:func:`run_job`: dataset, CV, models, trials of DLSR and the baselines) with the other
     folds' objects as its train objects and the fold's as its trial objects. The trials of
     all folds are then pooled, detector by detector, and DLSR is compared with each other
-    detector scene by scene (exact McNemar, :func:`graspsim.compare.compare_outcomes`). The
-    test objects are never used: this is where settings are chosen. Each fold's run is
-    resumed like any run.
+    detector scene by scene (exact McNemar, :func:`graspsim.compare.compare_outcomes`). With
+    the default ``train_objects`` the test objects are never used: this is where settings are
+    chosen. Each fold's run is resumed like any run.
 
     Parameters
     ----------

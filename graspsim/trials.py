@@ -172,7 +172,8 @@ def object_folds(objects="train", n_folds: int = 3, seed: int = 0) -> list[list[
     Returns
     -------
     list of list of str
-        Object names per fold, each in the built-in order; fold sizes differ by at most one.
+        Object names per fold, each in the order of ``objects`` (built-in names: the built-in
+        order); fold sizes differ by at most one.
     """
     names = [s.name for s in resolve_objects(objects)]
     if isinstance(n_folds, bool) or not isinstance(n_folds, (int, np.integer)) or not (
