@@ -603,7 +603,7 @@ def objectwise_validation(config: RunConfig | None = None, n_folds: int = 3, fol
     folds = object_folds(config.train_objects, n_folds, fold_seed)
     root = Path(out) if out is not None else Path("runs") / f"{config.name}-objectwise"
     names = trial_names(config)
-    pooled: dict[str, list] = {name: [] for name in names}
+    pooled: dict[str, dict] = {name: {} for name in names}  # (fold, trial index) -> record
     fold_info = []
     for k, fold in enumerate(folds):
         others = [n for j, f in enumerate(folds) if j != k for n in f]
@@ -611,20 +611,21 @@ def objectwise_validation(config: RunConfig | None = None, n_folds: int = 3, fol
                                   train_objects=",".join(others), trial_objects=",".join(fold))
         folder = root / f"fold{k}"
         log.info("object fold %d of %d: trials on %s", k + 1, len(folds), ", ".join(fold))
-        run_job(cfg.validated(), out=folder, resume=True, progress=progress)
+        run_job(cfg, out=folder, resume=True, progress=progress)
         info = {"objects": fold, "run": str(folder), "detectors": {}}
         for name in names:
             recs = load_folder(folder / "trials" / name)["records"]
-            pooled[name].extend(recs[i] for i in sorted(recs))
+            pooled[name].update({(k, i): r for i, r in recs.items()})
             info["detectors"][name] = {"successes": sum(bool(r["success"])
                                                         for r in recs.values()),
                                        "n": len(recs)}
         fold_info.append(info)
-    detectors = {name: summarize(pooled[name]) for name in names}
-    dlsr = [bool(r["success"]) for r in pooled["dlsr"]]
+    detectors = {name: summarize(list(pooled[name].values())) for name in names}
     comparisons = []
-    for name in names[1:]:
-        c = compare_outcomes(dlsr, [bool(r["success"]) for r in pooled[name]],
+    for name in names[1:]:  # paired by fold and trial index, as graspsim compare pairs
+        keys = sorted(pooled["dlsr"].keys() & pooled[name].keys())
+        c = compare_outcomes([bool(pooled["dlsr"][k]["success"]) for k in keys],
+                             [bool(pooled[name][k]["success"]) for k in keys],
                              names=("dlsr", name))
         comparisons.append({"a": "dlsr", "b": name, **c})
     result = {"config": asdict(config), "n_folds": len(folds), "fold_seed": fold_seed,
