@@ -38,8 +38,6 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
-#: The numerical test modules: encoders, learners, whitening, features, SVM, detection,
-#: preprocessing, recognition, patches, non-finite input and scikit-learn's estimator checks.
 #: The whole suite: a test anywhere may depend on rounding (the object generator's test compared
 #: files byte for byte and failed under Prescott's kernels while the numerical modules passed).
 TESTS = ["tests"]

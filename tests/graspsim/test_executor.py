@@ -60,7 +60,6 @@ def test_ray_matches_loky():
     assert ray_out == loky
 
 
-
 def test_leaving_the_stream_early_stops_the_workers_quietly(pid_after, still_running):
     # An error while the caller handles a result (as Ctrl-C or SIGTERM there): the pending
     # tasks are cancelled and the loky workers stopped, without joblib's "tasks cancelled"
