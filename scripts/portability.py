@@ -145,18 +145,28 @@ def run(config: dict, tests: list[str], pytest_args: list[str], logs: Path) -> b
     return ok
 
 
+def parse_args(argv: list[str]):
+    """``(only, tests, pytest_args)`` from the command line (see the module docstring)."""
+    import argparse
+
+    cut = argv.index("--") if "--" in argv else len(argv)
+    parser = argparse.ArgumentParser(
+        prog="portability.py", description="Run the tests under each BLAS kernel set and with "
+        "generic compiled kernels; arguments after -- go to pytest.")
+    parser.add_argument("--only", type=lambda v: [k for k in v.split(",") if k],
+                        metavar="KEYS", help="comma-separated keys: run the configurations whose "
+                        "name contains one of them")
+    parser.add_argument("tests", nargs="*", metavar="TEST_PATH",
+                        help=f"test paths (default: {' '.join(TESTS)})")
+    args = parser.parse_args(argv[:cut])
+    return args.only, args.tests, argv[cut + 1:]
+
+
 def main(argv: list[str]) -> int:
-    if "--" in argv:
-        cut = argv.index("--")
-        tests, pytest_args = argv[:cut], argv[cut + 1:]
-    else:
-        tests, pytest_args = argv, []
-    only = None
-    if tests[:1] == ["--only"]:
-        if len(tests) < 2:
-            print("portability: error: --only needs a comma-separated list of keys")
-            return 2
-        only, tests = tests[1].split(","), tests[2:]
+    only, tests, pytest_args = parse_args(argv)
+    if only is not None and not only:
+        print("portability: error: --only needs a comma-separated list of keys")
+        return 2
     tests = tests or TESTS
     logs = Path(tempfile.mkdtemp(prefix="portability-"))
     configs = configurations(cpu_flags())
