@@ -35,6 +35,12 @@ folders (``config.json`` with ``dataset_fingerprint``, ``scores.jsonl`` records 
 ``image`` with ``success``) pair when the fingerprints agree. Anything else is refused with a
 one-line ``ValueError`` naming both folders and what differs.
 
+Object-wise validation folders (``objectwise.json``, written by
+:func:`graspsim.pipeline.objectwise_validation`) hold one run per object fold; two of them
+pair when their folds hold the same objects and each fold's DLSR trial folders pair as above.
+Their DLSR trials are pooled over the folds, keyed by (fold, trial index): this compares two
+configurations on train objects their models never saw.
+
 Folders of different lengths (a 100-trial and a 200-trial run of the same seed, or a run still
 going) are paired on the trials or images present in both: trial ``i`` is the same scene in
 both, so the shared part is a valid paired sample. How many were left out of each folder is
@@ -59,10 +65,14 @@ __all__ = [
     "paired_difference_ci",
     "compare_outcomes",
     "load_folder",
+    "pooled_fold_trials",
     "compare_pair",
     "compare_folders",
     "comparison_text",
 ]
+
+#: The summary file that marks an object-wise validation folder.
+OBJECTWISE = "objectwise.json"
 
 CI_METHOD = "Newcombe (1998) method 10: Wilson score intervals combined for paired data"
 TEST_METHOD = "exact McNemar: two-sided binomial test of the discordant pairs, p = 1/2"
@@ -247,27 +257,36 @@ def compare_outcomes(a, b, names=("A", "B"), alpha: float = 0.05, unit: str = "t
 
 
 def load_folder(folder) -> dict:
-    """A trial or score folder's configuration and outcome records.
+    """A trial, score or object-wise validation folder's configuration and outcome records.
 
     Parameters
     ----------
     folder : str or Path
-        A ``graspsim trials`` folder (``config.json``, ``trials.jsonl``) or a ``graspsim score``
-        folder (``config.json`` with ``dataset_fingerprint``, ``scores.jsonl``).
+        A ``graspsim trials`` folder (``config.json``, ``trials.jsonl``), a ``graspsim score``
+        folder (``config.json`` with ``dataset_fingerprint``, ``scores.jsonl``) or a finished
+        object-wise validation (``objectwise.json``; its DLSR trials).
 
     Returns
     -------
     dict
-        ``folder`` (Path), ``kind`` (``"trials"`` or ``"scores"``), ``config`` (dict), ``name``
-        (the detector recorded in the configuration, else the folder's name), ``file`` (the
-        JSONL path) and ``records`` (dict: trial index (int) or image id (str) -> record).
+        ``folder`` (Path), ``kind`` (``"trials"``, ``"scores"`` or ``"objectwise"``),
+        ``config`` (dict), ``name`` (the detector recorded in the configuration, else the
+        folder's name; the configuration's name for an object-wise validation), ``file`` (the
+        JSONL path, or ``objectwise.json``) and ``records`` (dict: trial index (int), image id
+        (str) or (fold, trial index) -> record); an object-wise validation also has ``folds``
+        (each fold's loaded DLSR trial folder).
     """
     from dlsr.records import read_json, read_jsonl
 
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"{folder}: no such folder")
+    if (folder / OBJECTWISE).exists():
+        return _load_objectwise(folder)
     cfg_path = folder / "config.json"
+    if not cfg_path.exists() and (folder / "fold0").is_dir():
+        raise FileNotFoundError(f"{folder / OBJECTWISE} is missing: {folder} looks like an "
+                                "unfinished object-wise validation; run it to the end first")
     if not cfg_path.exists():
         raise FileNotFoundError(f"{cfg_path} is missing: {folder} is not a trials or score folder")
     config = read_json(cfg_path, "configuration")
@@ -300,11 +319,67 @@ def load_folder(folder) -> dict:
             "records": records}
 
 
+def pooled_fold_trials(folder, n_folds: int, detector: str = "dlsr") -> tuple[list, dict]:
+    """One detector's trials in the fold runs of an object-wise validation, pooled.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The validation's folder (fold runs ``fold0``, ``fold1``, ...).
+    n_folds : int
+    detector : str
+        Its trial folder in each run (``fold<k>/trials/<detector>``).
+
+    Returns
+    -------
+    folds : list of dict
+        Each fold's loaded trial folder (:func:`load_folder`).
+    records : dict
+        ``(fold, trial index) -> record`` over every fold, the key by which two validations'
+        (or two detectors') trials pair.
+    """
+    folder = Path(folder)
+    loaded, records = [], {}
+    for k in range(n_folds):
+        sub = load_folder(folder / f"fold{k}" / "trials" / detector)
+        if sub["kind"] != "trials":
+            raise ValueError(f"{sub['folder']}: not a trials folder")
+        loaded.append(sub)
+        records.update({(k, i): r for i, r in sub["records"].items()})
+    return loaded, records
+
+
+def _load_objectwise(folder: Path, detector: str = "dlsr") -> dict:
+    """An object-wise validation folder as one folder of paired trials (see
+    :func:`load_folder`): ``detector``'s trials of every fold, keyed by (fold, trial index)."""
+    from dlsr.records import read_json
+
+    path = folder / OBJECTWISE
+    summary = read_json(path, "object-wise validation summary")
+    folds = summary.get("folds") if isinstance(summary, dict) else None
+    if not isinstance(folds, list) or not folds or not all(
+            isinstance(f, dict) and isinstance(f.get("objects"), list) for f in folds):
+        raise ValueError(f"{path}: no 'folds' with their objects")
+    loaded, records = pooled_fold_trials(folder, len(folds), detector)
+    config = {"fold_seed": summary.get("fold_seed"),
+              "folds": [list(f["objects"]) for f in folds]}
+    name = str((summary.get("config") or {}).get("name") or folder.name)
+    return {"folder": folder, "kind": "objectwise", "config": config, "name": name,
+            "file": path, "records": records, "folds": loaded}
+
+
 def _scene_differences(a: dict, b: dict) -> list[str]:
     """What makes two loaded folders' scenes differ (empty: they pair)."""
     if a["kind"] != b["kind"]:
         return [f"a {a['kind']} folder against a {b['kind']} folder"]
     ca, cb = a["config"], b["config"]
+    if a["kind"] == "objectwise":
+        if ca["folds"] != cb["folds"]:
+            return [f"object folds {json.dumps(ca['folds'])} vs {json.dumps(cb['folds'])} "
+                    "(validate both with the same --folds and --fold-seed)"]
+        return [f"fold {k}: {d}" for k, (fa, fb) in enumerate(zip(a["folds"], b["folds"],
+                                                                 strict=True))
+                for d in _scene_differences(fa, fb)]
     if a["kind"] == "scores":
         fa, fb = ca.get("dataset_fingerprint"), cb.get("dataset_fingerprint")
         return [] if fa == fb else [f"dataset_fingerprint {fa} vs {fb}"]
@@ -340,7 +415,7 @@ def _pair(a: dict, b: dict, names, alpha: float) -> dict:
                          + "; ".join(diff))
     ka, kb = set(a["records"]), set(b["records"])
     keys = sorted(ka & kb)
-    unit = "trials" if a["kind"] == "trials" else "images"
+    unit = "images" if a["kind"] == "scores" else "trials"
     if not keys:
         raise ValueError(f"{a['folder']} and {b['folder']} share no {unit}")
     unpaired = {"a": len(ka - kb), "b": len(kb - ka)}
@@ -363,7 +438,8 @@ def _pair(a: dict, b: dict, names, alpha: float) -> dict:
 
 
 def compare_pair(folder_a, folder_b, names=None, alpha: float = 0.05) -> dict:
-    """Compare two trial folders (or two score folders) scene by scene.
+    """Compare two trial folders (or two score folders, or two object-wise validations) scene by
+    scene.
 
     Parameters
     ----------
@@ -390,7 +466,7 @@ def compare_folders(folders, alpha: float = 0.05) -> list[dict]:
     Parameters
     ----------
     folders : sequence of str or Path
-        At least two trial folders, or at least two score folders.
+        At least two trial folders, two score folders or two object-wise validation folders.
     alpha : float
 
     Returns

@@ -69,6 +69,10 @@ class RunConfig:
         Dictionary size and the number of random patches it is learned from.
     folds, inner_folds : int
         Cross-validation folds (object-wise) for recognition and detection.
+    offline : bool
+        Run the offline benchmarks: recognition and detection by cross-validation on the
+        dataset. False: dataset, models and trials only (the report says they were not run);
+        object-wise validation (:func:`objectwise_validation`) runs its folds so.
     C : float
         SVM cost used for detection and the final model.
     detector : {"lattice", "dense", "exact"}
@@ -131,6 +135,7 @@ class RunConfig:
     n_patches: int = 50_000
     folds: int = 5
     inner_folds: int = 3
+    offline: bool = True
     C: float = 1.0
     detector: str = "lattice"
     physical: bool = True
@@ -396,7 +401,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
     samples = load_cornell(root / "dataset")
 
     # 2. Recognition by nested cross-validation (object-wise).
-    if not stages.done("recognition"):
+    if config.offline and not stages.done("recognition"):
         from dlsr import recognition as rec
 
         t0 = time.perf_counter()
@@ -423,7 +428,7 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         })
 
     # 3. Detection by cross-validation (object-wise, rectangle metric).
-    if not stages.done("detection"):
+    if config.offline and not stages.done("detection"):
         from .benchmarks import detection_benchmark
 
         t0 = time.perf_counter()
@@ -563,7 +568,7 @@ def resume_job(folder, progress: bool = True) -> Path:
 
 
 def objectwise_validation(config: RunConfig | None = None, n_folds: int = 3, fold_seed: int = 0,
-                          out=None, progress: bool = True) -> dict:
+                          out=None, progress: bool = True, offline: bool = False) -> dict:
     """Object-wise validation of a run configuration: trials on train objects it never saw.
 
     ``config.train_objects`` (default: the built-in train objects) is split into ``n_folds``
@@ -573,7 +578,9 @@ def objectwise_validation(config: RunConfig | None = None, n_folds: int = 3, fol
     all folds are then pooled, detector by detector, and DLSR is compared with each other
     detector scene by scene (exact McNemar, :func:`graspsim.compare.compare_outcomes`). With
     the default ``train_objects`` the test objects are never used: this is where settings are
-    chosen. Each fold's run is resumed like any run.
+    chosen. Each fold's run is resumed like any run. Two configurations validated with the same
+    folds compare with ``graspsim compare A B`` (:func:`graspsim.compare.compare_pair`), which
+    pools their DLSR trials over the folds.
 
     Parameters
     ----------
@@ -587,6 +594,9 @@ def objectwise_validation(config: RunConfig | None = None, n_folds: int = 3, fol
         Folder of the fold runs and the summary (default ``runs/<config.name>-objectwise``).
     progress : bool
         Progress bars.
+    offline : bool
+        Also run each fold's offline benchmarks (recognition and detection CV: about a third
+        of a fold's time, and not used here); the fold runs' ``offline`` setting.
 
     Returns
     -------
@@ -596,30 +606,29 @@ def objectwise_validation(config: RunConfig | None = None, n_folds: int = 3, fol
         first, without the per-trial records), ``comparisons`` (DLSR against each other
         detector), ``folder``. Also written to ``objectwise.json`` and ``objectwise.md``.
     """
-    from .compare import compare_outcomes, load_folder
+    from .compare import compare_outcomes, pooled_fold_trials
     from .trials import object_folds, summarize
 
     config = (config or RunConfig()).validated()
     folds = object_folds(config.train_objects, n_folds, fold_seed)
     root = Path(out) if out is not None else Path("runs") / f"{config.name}-objectwise"
     names = trial_names(config)
-    pooled: dict[str, dict] = {name: {} for name in names}  # (fold, trial index) -> record
     fold_info = []
     for k, fold in enumerate(folds):
         others = [n for j, f in enumerate(folds) if j != k for n in f]
-        cfg = dataclasses.replace(config, name=f"{config.name}-fold{k}",
+        cfg = dataclasses.replace(config, name=f"{config.name}-fold{k}", offline=offline,
                                   train_objects=",".join(others), trial_objects=",".join(fold))
         folder = root / f"fold{k}"
         log.info("object fold %d of %d: trials on %s", k + 1, len(folds), ", ".join(fold))
         run_job(cfg, out=folder, resume=True, progress=progress)
-        info = {"objects": fold, "run": str(folder), "detectors": {}}
-        for name in names:
-            recs = load_folder(folder / "trials" / name)["records"]
-            pooled[name].update({(k, i): r for i, r in recs.items()})
-            info["detectors"][name] = {"successes": sum(bool(r["success"])
-                                                        for r in recs.values()),
+        fold_info.append({"objects": fold, "run": str(folder), "detectors": {}})
+    pooled = {}  # detector -> {(fold, trial index): record}
+    for name in names:
+        runs, pooled[name] = pooled_fold_trials(root, len(folds), name)
+        for info, run in zip(fold_info, runs, strict=True):
+            recs = run["records"].values()
+            info["detectors"][name] = {"successes": sum(bool(r["success"]) for r in recs),
                                        "n": len(recs)}
-        fold_info.append(info)
     detectors = {name: summarize(list(pooled[name].values())) for name in names}
     comparisons = []
     for name in names[1:]:  # paired by fold and trial index, as graspsim compare pairs

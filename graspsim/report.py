@@ -495,7 +495,10 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
                      f"Cornell object-wise)"])
     for name, acc in (det.get("baselines") or {}).items():
         rows.append(["detection (rectangle metric)", name, _pct(acc, 2), ""])
-    blocks.append(("table", ["task", "method", "this run", "paper"], rows))
+    if rows:
+        blocks.append(("table", ["task", "method", "this run", "paper"], rows))
+    elif not config.offline:
+        blocks.append(("p", "Not run (`offline = false`): dataset, models and trials only."))
     for name in ("table1.md",):
         f = root / "recognition" / name
         if f.exists():

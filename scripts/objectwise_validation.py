@@ -5,10 +5,12 @@ folds' objects as its train objects and the fold's as its trial objects, so ever
 tried on objects the model never saw, without touching the test objects. The trials are pooled
 over the folds and DLSR is compared with each other detector scene by scene (exact McNemar).
 Use it to choose settings: validate two configurations with the same --folds and --fold-seed
-and compare their fold runs' trial folders (`graspsim compare`), or read their summaries.
+and compare them with `graspsim compare A B` (their DLSR trials pooled over the folds, paired
+scene by scene). The fold runs skip the offline benchmarks (recognition and detection CV) unless
+--offline is given.
 
     .venv/bin/python scripts/objectwise_validation.py [--config configs/x.toml] [--quick] \\
-        [--folds 3] [--fold-seed 0] [--out runs/default-objectwise]
+        [--folds 3] [--fold-seed 0] [--out runs/default-objectwise] [--offline]
 
 Runs resume: the same command continues an interrupted validation. Written: the fold runs,
 objectwise.json and objectwise.md in the output folder.
@@ -33,6 +35,8 @@ def main(argv=None) -> int:
     p.add_argument("--fold-seed", type=int, default=0, help="seed of the split (default 0)")
     p.add_argument("--out", default=None, help="output folder (default "
                    "runs/<name>-objectwise)")
+    p.add_argument("--offline", action="store_true", help="also run each fold's offline "
+                   "benchmarks (recognition and detection CV; not used by the validation)")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
@@ -40,7 +44,8 @@ def main(argv=None) -> int:
         with sigterm_unwinds():  # kill / scancel stop the workers too, as Ctrl-C does
             result = objectwise_validation(config, n_folds=args.folds,
                                            fold_seed=args.fold_seed, out=args.out,
-                                           progress=sys.stderr.isatty())
+                                           progress=sys.stderr.isatty(),
+                                           offline=args.offline)
     except (ValueError, FileNotFoundError) as exc:
         print(f"objectwise_validation: {exc}", file=sys.stderr)
         return 2

@@ -13,11 +13,14 @@ def register(subparsers) -> None:
                     "only B / neither, the difference in success rate with Newcombe's 95 % "
                     "interval for paired proportions, the exact McNemar p-value and a verdict. "
                     "Trial folders must share seed, objects and objects per scene; score "
-                    "folders the dataset fingerprint. Scenes present in only one folder are "
-                    "left out (and counted).",
+                    "folders the dataset fingerprint; object-wise validation folders "
+                    "(objectwise.json) the same object folds, and their DLSR trials are pooled "
+                    "over the folds. Scenes present in only one folder are left out (and "
+                    "counted).",
     )
     p.add_argument("folders", nargs="+", metavar="DIR",
-                   help="graspsim trials (or graspsim score) output folders, at least two")
+                   help="graspsim trials (or graspsim score, or object-wise validation) output "
+                        "folders, at least two")
     p.add_argument("--out", default=None, metavar="FILE",
                    help="also write the comparisons as JSON to FILE")
     p.add_argument("--alpha", type=float, default=0.05,

@@ -13,6 +13,7 @@ from graspsim.compare import (
     compare_folders,
     compare_outcomes,
     compare_pair,
+    load_folder,
     mcnemar_exact,
     paired_counts,
     paired_difference_ci,
@@ -286,3 +287,54 @@ def test_cli_refuses_different_scenes_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("graspsim compare: error: ") and "seed 0 vs 5" in err
     assert "\n" not in err
+
+
+def _objectwise(path, name, folds, per_fold, seeds=None):
+    """An object-wise validation folder: ``objectwise.json`` and each fold run's DLSR trials
+    (``per_fold``: the outcomes of each fold)."""
+    for k, success in enumerate(per_fold):
+        _trials(path / f"fold{k}" / "trials" / "dlsr", "dlsr", success,
+                seed=(seeds or {}).get(k, 7), objects=",".join(folds[k]),
+                names={i: folds[k][i % len(folds[k])] for i in range(len(success))})
+    (path / "objectwise.json").write_text(json.dumps({
+        "config": {"name": name}, "n_folds": len(folds), "fold_seed": 0,
+        "folds": [{"objects": f, "run": str(path / f"fold{k}")} for k, f in enumerate(folds)]}))
+    return path
+
+
+def test_objectwise_validations_pool_their_folds_by_fold_and_trial(tmp_path):
+    folds = [["mug", "can"], ["box", "dice"]]
+    a = _objectwise(tmp_path / "a", "default", folds, [[1, 1, 0, 0], [1, 0, 1]])
+    b = _objectwise(tmp_path / "b", "wider", folds, [[1, 0, 1, 0], [0, 0, 1]])
+    c = compare_pair(a, b)
+    # fold 0: both 1, only a 1, only b 1, neither 1; fold 1: only a 1, both 1, neither 1
+    assert c["counts"] == {"both": 2, "only_a": 2, "only_b": 1, "neither": 2}
+    assert (c["a"]["name"], c["b"]["name"], c["n"], c["unit"]) == ("default", "wider", 7,
+                                                                    "trials")
+    assert c["kind"] == "objectwise"
+    # the same trial index in two folds is two scenes: pooling by index alone would pair 4
+    assert len(load_folder(a)["records"]) == 7
+    json.dumps(c)
+
+
+@pytest.mark.parametrize("change,what", [
+    ({"folds": [["mug", "box"], ["can", "dice"]]}, "object folds"),
+    ({"seeds": {1: 8}}, "fold 1: seed 7 vs 8"),
+])
+def test_objectwise_validations_of_other_folds_or_scenes_are_refused(tmp_path, change, what):
+    folds = [["mug", "can"], ["box", "dice"]]
+    a = _objectwise(tmp_path / "a", "default", folds, [[1, 0], [1, 0]])
+    b = _objectwise(tmp_path / "b", "other", change.get("folds", folds), [[1, 1], [0, 0]],
+                    seeds=change.get("seeds"))
+    with pytest.raises(ValueError, match="same scenes") as err:
+        compare_pair(a, b)
+    assert what in str(err.value)
+    with pytest.raises(ValueError, match="objectwise folder against a trials folder"):
+        compare_pair(a, a / "fold0" / "trials" / "dlsr")
+
+
+def test_an_unfinished_objectwise_validation_is_named(tmp_path):
+    a = _objectwise(tmp_path / "a", "default", [["mug"], ["box"]], [[1], [0]])
+    (a / "objectwise.json").unlink()
+    with pytest.raises(FileNotFoundError, match="unfinished object-wise validation"):
+        load_folder(a)

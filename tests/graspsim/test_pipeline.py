@@ -88,6 +88,34 @@ def test_resume_redoes_nothing_finished(tiny_run, monkeypatch):
     assert (out / "trials" / "dlsr" / "trials.jsonl").read_text() == before
 
 
+def test_offline_false_skips_the_offline_benchmarks(tiny_run, tmp_path, monkeypatch):
+    """A run with ``offline = false`` (as object-wise validation's fold runs) never starts the
+    recognition or detection CV, and its report says so (a copy of the tiny run without those
+    stages, resumed)."""
+    out, _ = tiny_run
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy, ignore=shutil.ignore_patterns("recognition", "detection"))
+    stages = json.loads((copy / "stages.json").read_text())
+    del stages["recognition"], stages["detection"]
+    (copy / "stages.json").write_text(json.dumps(stages))
+    run = json.loads((copy / "run.json").read_text())
+    run["config"]["offline"] = False
+    (copy / "run.json").write_text(json.dumps(run))
+
+    def boom(*a, **k):
+        raise AssertionError("an offline benchmark ran")
+
+    monkeypatch.setattr("dlsr.recognition.run_recognition_benchmark", boom)
+    monkeypatch.setattr("graspsim.benchmarks.detection_benchmark", boom)
+    config = pipeline.load_config(**TINY, offline=False)
+    report = pipeline.run_job(config, out=copy, progress=False)
+    assert set(json.loads((copy / "stages.json").read_text())) == set(stages)
+    assert not (copy / "recognition").exists() and not (copy / "detection").exists()
+    md = report.read_text()
+    assert "Not run (`offline = false`)" in md and "| dlsr |" in md
+    assert "Not run" not in (out / "report.md").read_text()
+
+
 def test_interrupted_trials_continue(tiny_run, tmp_path):
     out, _ = tiny_run
     copy = tmp_path / "copy"
@@ -210,6 +238,7 @@ def test_objectwise_validation_runs_every_fold_and_pools_the_trials(tmp_path, mo
                                   gripper_aware=False, physical=False, detector="dense")
     result = pipeline.objectwise_validation(config, n_folds=2, fold_seed=1, out=tmp_path)
     assert len(runs) == 2 and [r.name for r in runs] == ["v-fold0", "v-fold1"]
+    assert not any(r.offline for r in runs)  # the folds skip the offline benchmarks
     tried = [r.trial_objects.split(",") for r in runs]
     assert sorted(tried[0] + tried[1]) == sorted(objects.split(","))
     for r, t in zip(runs, tried, strict=True):
