@@ -292,7 +292,8 @@ ENTRY_POINT_GROUP = "graspsim.detectors"
 _SPEC = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)*$")
 
 
-def executable(rects, obs, table_depth=None, tolerance: float = 0.003) -> np.ndarray:
+def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
+               unseen_surface: bool = True) -> np.ndarray:
     """Which rectangles this gripper can execute, judged from the observation alone.
 
     A rectangle passes when :func:`graspsim.grasp.rectangle_to_grasp` gives it a pose (depth
@@ -300,6 +301,14 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003) -> np.nda
     along the approach, meet no surface seen in the depth image
     (:func:`graspsim.grasp.fingers_collide`, with the table surface fitted to the depth as
     :func:`dlsr.detection.table_surface` finds it, where the executor stops the fingertips).
+
+    With ``unseen_surface`` the fingers must also miss the object's surface the sensor did not
+    return: inside the object region (:func:`dlsr.detection.table_plane_mask`, completed with
+    the missing depth inside its convex hull) a pixel without depth counts as the nearest seen
+    pixel of the object (:func:`dlsr.detection.fill_unseen_surface`): the rim of a dark or
+    enamelled mug, the wall of a glass. When no rectangle of ``rects`` passes so, the verdicts
+    without it are returned (an object the sensor hardly sees still gets a grasp). Not in the
+    paper; chosen on validation scenes of train objects (README, "Making DLSR grasp").
 
     Parameters
     ----------
@@ -310,12 +319,14 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003) -> np.nda
         The table's depth; fitted to ``obs["depth"]`` when None.
     tolerance : float
         Metres (see :func:`graspsim.grasp.fingers_collide`).
+    unseen_surface : bool
+        Fingers must also miss the object's unseen surface (above).
 
     Returns
     -------
     ndarray of shape (n,), bool
     """
-    from dlsr.detection import table_surface
+    from dlsr.detection import fill_unseen_surface, table_plane_mask, table_surface
 
     from .grasp import fingers_collide, rectangle_to_grasp
 
@@ -327,10 +338,22 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003) -> np.nda
     if table_depth is None and len(rects):
         table_depth = table_surface(depth, valid)
     out = np.zeros(len(rects), dtype=bool)
+    grasps = []
     for i, r in enumerate(rects):
         g = rectangle_to_grasp(r, depth, valid, obs["K"], obs["T_world_cam"])
+        grasps.append(g)
         out[i] = g.failure is None and not fingers_collide(
             g, depth, valid, obs["K"], obs["T_world_cam"], table_depth, tolerance=tolerance)
+    if unseen_surface and out.any():
+        filled, seen = fill_unseen_surface(depth, valid, table_plane_mask(depth, valid))
+        if (seen != valid).any():
+            strict = out.copy()
+            for i in np.flatnonzero(out):
+                strict[i] = not fingers_collide(grasps[i], filled, seen, obs["K"],
+                                                obs["T_world_cam"], table_depth,
+                                                tolerance=tolerance)
+            if strict.any():
+                return strict
     return out
 
 
@@ -339,7 +362,8 @@ class GripperAwareDetector:
 
     The wrapped detector proposes its ranked rectangles; those :func:`executable` rejects
     (no depth at the centre, wider than the gripper opens, a finger landing on a surface seen in
-    the depth image) are dropped and the first ``keep`` of the others returned in the same order.
+    the depth image, or on the object's unseen surface: ``unseen_surface``) are dropped and
+    the first ``keep`` of the others returned in the same order.
     Nothing of the simulator's state is used: a real robot can run the same check on its own
     camera's depth. A departure from the paper (which ranks rectangles by appearance alone).
 
@@ -352,12 +376,16 @@ class GripperAwareDetector:
         Rectangles returned at most.
     tolerance : float
         Metres (see :func:`graspsim.grasp.fingers_collide`).
+    unseen_surface : bool
+        See :func:`executable`.
     """
 
-    def __init__(self, detector, keep: int = 5, tolerance: float = 0.003):
+    def __init__(self, detector, keep: int = 5, tolerance: float = 0.003,
+                 unseen_surface: bool = True):
         self.detector = detector
         self.keep = keep
         self.tolerance = tolerance
+        self.unseen_surface = unseen_surface
 
     @property
     def requires_labels(self) -> bool:
@@ -368,14 +396,17 @@ class GripperAwareDetector:
         rects, _ = check_detections(self.detector.predict(obs), type(self.detector).__name__)
         if not rects:
             return []
-        ok = executable(rects, obs, tolerance=self.tolerance)
+        ok = executable(rects, obs, tolerance=self.tolerance,
+                        unseen_surface=self.unseen_surface)
         return [r for r, k in zip(rects, ok, strict=True) if k][: self.keep]
 
     def __repr__(self):
-        return f"GripperAwareDetector({self.detector!r}, keep={self.keep})"
+        return (f"GripperAwareDetector({self.detector!r}, keep={self.keep}, "
+                f"unseen_surface={self.unseen_surface})")
 
 
-def gripper_aware(detector, top_k: int = 40, keep: int = 5) -> GripperAwareDetector:
+def gripper_aware(detector, top_k: int = 40, keep: int = 5,
+                  unseen_surface: bool = True) -> GripperAwareDetector:
     """``detector`` made aware of this gripper (:class:`GripperAwareDetector`).
 
     A DLSR grid detector (:class:`dlsr.detection.DenseDetector` or
@@ -393,6 +424,8 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5) -> GripperAwareDetec
     top_k : int
         DLSR candidates ranked before the check.
     keep : int
+    unseen_surface : bool
+        The fingers must also miss the object's unseen surface (:func:`executable`).
 
     Returns
     -------
@@ -416,7 +449,7 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5) -> GripperAwareDetec
         detector.top_k = max(int(top_k), int(detector.top_k))
         if isinstance(detector, DenseDetector) and detector.rescore:
             detector.rescore = max(int(detector.rescore), detector.top_k)
-    return GripperAwareDetector(detector, keep=keep)
+    return GripperAwareDetector(detector, keep=keep, unseen_surface=unseen_surface)
 
 
 class PluginDetector:

@@ -396,6 +396,50 @@ def complete_region(region, valid) -> np.ndarray:
     return region | (hull.astype(bool) & ~valid)
 
 
+def fill_unseen_surface(depth, valid, region):
+    """The depth image with the object's unseen surface filled in from its seen surface.
+
+    The pixels without depth inside the completed object region (:func:`complete_region`:
+    the missing depth inside the convex hull of ``region``) get the depth of the nearest pixel
+    of ``region`` that has depth (exact Euclidean distance). A check that only trusts the
+    depth it sees (a finger coming down where the sensor returned nothing) then meets the rim
+    of a dark mug or the wall of a glass where the object is, not empty space.
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W), float
+        Metres, 0 where missing.
+    valid : ndarray of shape (H, W), bool
+    region : ndarray of shape (H, W), bool
+        The object region found from the observation (e.g. :func:`table_plane_mask`).
+
+    Returns
+    -------
+    depth : ndarray of shape (H, W), float
+        A new array (the input is not changed).
+    valid : ndarray of shape (H, W), bool
+        ``valid`` with the filled pixels added.
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    depth = np.asarray(depth)
+    valid = np.asarray(valid, dtype=bool)
+    region = np.asarray(region, dtype=bool)
+    if not (depth.shape == valid.shape == region.shape) or depth.ndim != 2:
+        raise ValueError(f"depth {depth.shape}, valid {valid.shape} and region {region.shape} "
+                         "must be the same (H, W)")
+    seen = region & valid & (depth > 0)
+    out, out_valid = depth.copy(), valid.copy()
+    if not seen.any():
+        return out, out_valid
+    unseen = complete_region(region, valid) & ~valid
+    if unseen.any():
+        _, (iy, ix) = distance_transform_edt(~seen, return_indices=True)
+        out[unseen] = depth[iy[unseen], ix[unseen]]
+        out_valid[unseen] = True
+    return out, out_valid
+
+
 def object_region(obs: dict, background=None, method: str = "auto", min_height: float = 0.006):
     """The object region of an observation and how it was found.
 

@@ -154,8 +154,8 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
         its tight one (``length + margin_px``) is not, add the widest opening within the reach
         in its place (``max_opening`` only): an object nearly as wide as the gripper's reach
         then also gets the candidate with all the clearance the gripper has, not only the
-        tight one. Not the default (validation scenes of the training objects, README: ahead
-        on objects the model had not seen, not separated over all validation scenes).
+        tight one. Not the default (README): ahead on a first 600 validation scenes of objects
+        the model had not seen, not on 900 new ones (702 against 697).
 
     Returns
     -------

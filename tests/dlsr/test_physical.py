@@ -334,6 +334,32 @@ def test_complete_region_adds_the_unseen_top_inside_the_hull():
         complete_region(region, valid[:10])
 
 
+def test_fill_unseen_surface_gives_the_hull_the_nearest_seen_depth_of_the_object():
+    from dlsr.detection import complete_region, fill_unseen_surface
+
+    obs, _ = _dark_top()
+    region, valid = obs["mask"], obs["depth_valid"]
+    depth = obs["depth"].copy()
+    depth[56:65, 62:67] = np.where(region[56:65, 62:67], 0.74, depth[56:65, 62:67])  # left
+    depth[56:65, 94:99] = np.where(region[56:65, 94:99], 0.76, depth[56:65, 94:99])  # right
+    before = depth.copy()
+    filled, seen = fill_unseen_surface(depth, valid, region)
+    np.testing.assert_array_equal(depth, before)  # the input is untouched
+    unseen = complete_region(region, valid) & ~valid
+    assert unseen.sum() > 100
+    np.testing.assert_array_equal(seen, valid | unseen)
+    np.testing.assert_array_equal(filled[valid], depth[valid])  # seen depth unchanged
+    assert filled[60, 68] == np.float32(0.74) and filled[60, 92] == np.float32(0.76)
+    assert not valid[50, 80] and filled[50, 80] == np.float32(0.75)  # nearest: the top island
+    assert not seen[50:70, 40:58].any() and (filled[50:70, 40:58] == 0).all()  # the shadow
+    # no seen object pixel: nothing to fill from
+    f0, s0 = fill_unseen_surface(depth, valid, np.zeros((H, W), bool))
+    np.testing.assert_array_equal(f0, depth)
+    np.testing.assert_array_equal(s0, valid)
+    with pytest.raises(ValueError, match="same"):
+        fill_unseen_surface(depth, valid[:10], region)
+
+
 def test_lattice_spans_an_object_whose_top_the_sensor_missed(physical_model):
     obs, _ = _dark_top()
     det = physical_model.detector("lattice", budget=None)

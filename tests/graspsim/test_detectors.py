@@ -105,6 +105,32 @@ def test_gripper_aware_keeps_the_executable_rectangles_in_order():
         executable(rects, {k: v for k, v in obs.items() if k != "K"})
 
 
+def test_fingers_must_miss_the_unseen_surface_of_the_object():
+    """The box's top returns depth only on a band through its centre and at its two ends: the
+    fingers of a narrow grasp come down where the sensor saw nothing, which the plain check
+    takes for empty space; the object's completed region says it is the box."""
+    from dlsr.rectangles import GraspRectangle
+    from graspsim.detectors import GripperAwareDetector, executable
+
+    obs = _look_down_obs()
+    valid = obs["depth_valid"].astype(bool)
+    valid[220:236, 280:361] = False
+    valid[245:260, 280:361] = False
+    obs.update(depth_valid=valid.astype(np.uint8),
+               depth=np.where(valid, obs["depth"], 0.0).astype(np.float32))
+    up = np.pi / 2
+    on_unseen = GraspRectangle(320, 240, up, 20, 20)  # fingers on the unseen top
+    across = GraspRectangle(320, 240, up, 52, 20)  # fingers beside the box
+    rects = [on_unseen, across]
+    assert executable(rects, obs, unseen_surface=False).tolist() == [True, True]
+    assert executable(rects, obs).tolist() == [False, True]
+    assert GripperAwareDetector(_Fixed(rects), keep=1).predict(obs) == [across]
+    assert GripperAwareDetector(_Fixed(rects), keep=1,
+                                unseen_surface=False).predict(obs) == [on_unseen]
+    # when no rectangle misses the unseen surface, the plain check decides
+    assert executable([on_unseen], obs).tolist() == [True]
+
+
 def test_gripper_aware_tells_a_dlsr_detector_to_search_clear_jaws_within_reach(saved_model):
     from dlsr.detection import DLSRDetector
     from graspsim.detectors import GripperAwareDetector, gripper_aware
