@@ -106,10 +106,11 @@ class RunConfig:
         In the trials, DLSR searches only rectangles this gripper can execute
         (:func:`graspsim.detectors.gripper_aware`: jaws beside the object, opening within
         reach, its best 40 checked against the depth image for fingers landing on a seen
-        surface). Not in the paper. When any of ``detector``, ``physical`` and
-        ``gripper_aware`` departs from the paper, the paper's configuration also runs in the
-        trials, as ``dlsr-paper``: a model trained the paper's way on the same images
-        (``model/dlsr-paper``, with ``physical``), the paper's grid search (``"dense"``).
+        surface or on the object's unseen surface). Not in the paper. When any of
+        ``detector``, ``physical`` and ``gripper_aware`` departs from the paper, the paper's
+        configuration also runs in the trials, as ``dlsr-paper``: a model trained the paper's
+        way on the same images (``model/dlsr-paper``, with ``physical``), the paper's grid
+        search (``"dense"``).
     trials : int
         Simulated grasp trials per detector on the test objects.
     trial_candidates : int

@@ -472,7 +472,7 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
         search += (", gripper-aware (not in the paper): openings the gripper reaches"
                    + ("" if lattice else " and jaws beside the object")
                    + ", and of its best 40 the first whose fingers land on no surface seen in "
-                     "the depth image")
+                     "the depth image nor on the object's unseen surface")
     from .pipeline import departs_from_paper
 
     if departs_from_paper(config):

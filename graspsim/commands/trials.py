@@ -24,9 +24,10 @@ def register(subparsers) -> None:
     p.add_argument("--gripper-aware", action="store_true",
                    help="keep only the detector's rectangles this gripper can execute, judged "
                         "from the depth image (opening within reach, fingers not landing on a "
-                        "seen surface); a DLSR model also searches only rectangles whose jaws "
-                        "come down beside the object (its grid) or openings within reach (its "
-                        "lattice), and ranks its best 40 (not in the paper)")
+                        "seen surface nor on the object's unseen surface); a DLSR model also "
+                        "searches only rectangles whose jaws come down beside the object (its "
+                        "grid) or openings within reach (its lattice), and ranks its best 40 "
+                        "(not in the paper)")
     p.add_argument("--objects", default="test",
                    help="train, test, all (the built-in split) or comma-separated "
                         "names of built-in objects")
