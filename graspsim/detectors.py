@@ -335,8 +335,12 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
             raise ValueError(f"judging rectangles executable needs the observation's {key!r}")
     depth = np.asarray(obs["depth"], dtype=np.float32)
     valid = np.asarray(obs.get("depth_valid", depth > 0), dtype=bool) & (depth > 0)
+    region = None
     if table_depth is None and len(rects):
-        table_depth = table_surface(depth, valid)
+        if unseen_surface:  # the table fitted once for both
+            region, table_depth = table_plane_mask(depth, valid, return_surface=True)
+        else:
+            table_depth = table_surface(depth, valid)
     out = np.zeros(len(rects), dtype=bool)
     grasps = []
     for i, r in enumerate(rects):
@@ -345,7 +349,9 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
         out[i] = g.failure is None and not fingers_collide(
             g, depth, valid, obs["K"], obs["T_world_cam"], table_depth, tolerance=tolerance)
     if unseen_surface and out.any():
-        filled, seen = fill_unseen_surface(depth, valid, table_plane_mask(depth, valid))
+        if region is None:
+            region = table_plane_mask(depth, valid)
+        filled, seen = fill_unseen_surface(depth, valid, region)
         if (seen != valid).any():
             strict = out.copy()
             for i in np.flatnonzero(out):

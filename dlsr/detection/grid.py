@@ -265,7 +265,7 @@ def table_surface(depth, depth_valid=None, stride: int = 4, n_iter: int = 100,
 
 def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride: int = 4,
                      n_iter: int = 100, tol: float = 0.003, random_state=0, degree: int = 3,
-                     band: float = 0.025, min_area: int = 20) -> np.ndarray:
+                     band: float = 0.025, min_area: int = 20, return_surface: bool = False):
     """The object standing on the table, from depth alone.
 
     The table's surface is fitted to the valid depth (subsampled by ``stride``): RANSAC on the
@@ -310,10 +310,16 @@ def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride:
         RANSAC's inlier band as a fraction of the depth (0.025: 25 mm at 1 m).
     min_area : int
         Smallest object blob, pixels.
+    return_surface : bool
+        Also return the fitted table surface (what :func:`table_surface` returns for the same
+        arguments), so that a caller needing both fits the table once.
 
     Returns
     -------
-    ndarray of shape (H, W), bool (empty when nothing stands out or the depth is unusable).
+    region : ndarray of shape (H, W), bool
+        Empty when nothing stands out or the depth is unusable.
+    surface : ndarray of shape (H, W), float64, or None
+        Only with ``return_surface``: as :func:`table_surface`.
     """
     if int(degree) != degree or degree < 1:
         raise ValueError(f"degree must be an integer >= 1, got {degree!r}")
@@ -321,13 +327,19 @@ def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride:
     valid = valid_depth(depth, depth_valid)
     H, W = depth.shape
     empty = np.zeros((H, W), dtype=bool)
-    if valid.sum() < 50:
-        return empty
-    fit = _table_surface(np.where(valid, depth, 1.0), valid, degree, stride, n_iter, tol, band,
-                         random_state)
-    if fit is None or not fit[1].any():
-        return empty
-    surface, table, sigma = fit
+    fit = None if valid.sum() < 50 else _table_surface(
+        np.where(valid, depth, 1.0), valid, degree, stride, n_iter, tol, band, random_state)
+    region = empty if fit is None or not fit[1].any() else _standing_object(
+        depth, valid, *fit, min_height, min_area)
+    if return_surface:
+        return region, None if fit is None else fit[0]
+    return region
+
+
+def _standing_object(depth, valid, surface, table, sigma, min_height, min_area) -> np.ndarray:
+    """:func:`table_plane_mask`'s object region, given the fitted table."""
+    H, W = depth.shape
+    empty = np.zeros((H, W), dtype=bool)
     hull = cv2.convexHull(np.argwhere(table)[:, ::-1].astype(np.int32))
     on_table = np.zeros((H, W), np.uint8)
     cv2.fillConvexPoly(on_table, hull, 1)
@@ -420,8 +432,6 @@ def fill_unseen_surface(depth, valid, region):
     valid : ndarray of shape (H, W), bool
         ``valid`` with the filled pixels added.
     """
-    from scipy.ndimage import distance_transform_edt
-
     depth = np.asarray(depth)
     valid = np.asarray(valid, dtype=bool)
     region = np.asarray(region, dtype=bool)
@@ -429,15 +439,38 @@ def fill_unseen_surface(depth, valid, region):
         raise ValueError(f"depth {depth.shape}, valid {valid.shape} and region {region.shape} "
                          "must be the same (H, W)")
     seen = region & valid & (depth > 0)
-    out, out_valid = depth.copy(), valid.copy()
+    out_valid = valid.copy()
     if not seen.any():
-        return out, out_valid
+        return depth.copy(), out_valid
     unseen = complete_region(region, valid) & ~valid
-    if unseen.any():
-        _, (iy, ix) = distance_transform_edt(~seen, return_indices=True)
-        out[unseen] = depth[iy[unseen], ix[unseen]]
-        out_valid[unseen] = True
-    return out, out_valid
+    out_valid[unseen] = True
+    out = _nearest_fill(depth, unseen, seen)
+    return (depth.copy() if out is depth else out), out_valid
+
+
+def _nearest_fill(depth, holes, source):
+    """``depth`` with each pixel of ``holes`` set to the depth of the nearest ``source`` pixel
+    (exact Euclidean distance); ``depth`` itself when there is nothing to fill or nothing to
+    fill from.
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W)
+    holes, source : ndarray of shape (H, W), bool
+
+    Returns
+    -------
+    ndarray of shape (H, W)
+        A new array when a hole was filled.
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    if not holes.any() or not source.any():
+        return depth
+    _, (iy, ix) = distance_transform_edt(~source, return_indices=True)
+    out = depth.copy()
+    out[holes] = depth[iy[holes], ix[holes]]
+    return out
 
 
 def object_region(obs: dict, background=None, method: str = "auto", min_height: float = 0.006):

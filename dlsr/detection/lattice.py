@@ -24,7 +24,7 @@ import numpy as np
 from ..datasets import check_camera_matrix
 from ..rectangles import GraspRectangle
 from .exact import Detection, _check_obs, _empty, _observed_region
-from .grid import complete_region, table_surface
+from .grid import _nearest_fill, complete_region, table_surface
 from .model import PATCHES_PER_RECTANGLE
 
 __all__ = ["LatticeDetector", "chord", "chords", "lattice_candidates", "lattice_step",
@@ -228,15 +228,7 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
 
 def _fill_region_holes(depth, valid, region):
     """``depth`` with the region's missing pixels set to the nearest valid depth."""
-    from scipy.ndimage import distance_transform_edt
-
-    holes = region & ~valid
-    if not holes.any() or not valid.any():
-        return depth
-    _, (iy, ix) = distance_transform_edt(~valid, return_indices=True)
-    out = depth.copy()
-    out[holes] = depth[iy[holes], ix[holes]]
-    return out
+    return _nearest_fill(depth, region & ~valid, valid)
 
 
 class LatticeDetector:
