@@ -212,6 +212,7 @@ def make_scene(
     max_redraws: int = 20,
     upright: float = 0.5,
     table: str = "random",
+    restarts: int = 3,
 ) -> Scene:
     """Drop objects one by one at random poses and let them settle.
 
@@ -230,6 +231,7 @@ def make_scene(
     settle_time : float
         Seconds of simulation after which an object that still moves is re-drawn.
     max_redraws : int
+        Re-draws of an object that does not rest before the pile is started again.
     upright : float
         Probability of dropping an object in its modelled (upright) orientation with a random
         yaw, as people place objects for a Cornell-like picture; otherwise the orientation is
@@ -238,10 +240,22 @@ def make_scene(
         The table top's colour: ``"random"``, each channel uniform in 0.25-0.75 (muted
         colours); ``"grey"``, a light grey of level 0.6-0.8 (like Jacquard's renders) made from
         the same three draws (their mean, rescaled), so the objects and poses do not change.
+    restarts : int
+        Times the pile is started again from an empty table (with the next draws of ``rng``)
+        when an object still does not rest after ``max_redraws`` re-draws: in a pile, an object
+        already placed can keep every new one from settling. A scene made without it is the
+        same as before this option existed.
 
     Returns
     -------
     Scene
+        Its ``redraws`` list every re-draw and restart.
+
+    Raises
+    ------
+    ValueError
+        When the pile could not be made in ``restarts + 1`` attempts (the message says which
+        object moved last).
     """
     if not specs:
         raise ValueError("make_scene needs at least one object spec")
@@ -249,7 +263,7 @@ def make_scene(
         raise ValueError(f"n_objects must be >= 1, got {n_objects}")
     hue = rng.uniform(0.25, 0.75, size=3)
     scene = Scene([], table_z, table_colour(hue, table))
-    redraws = 0
+    redraws, restarted = 0, 0
     while len(scene.objects) < n_objects:
         spec = specs[int(rng.integers(len(specs)))]
         xy = rng.uniform(-spread, spread, size=2)
@@ -274,7 +288,15 @@ def make_scene(
         scene.redraws.append(msg)
         redraws += 1
         if redraws > max_redraws:
-            raise ValueError(f"could not make a scene: {redraws} re-draws ({msg})")
+            if restarted >= restarts:
+                raise ValueError(f"could not make a scene: {redraws} re-draws in each of "
+                                 f"{restarted + 1} attempts (last: {msg})")
+            restarted += 1
+            msg = (f"{redraws} re-draws without a rest ({spec.name!r} last); the pile is "
+                   f"started again ({restarted} of {restarts})")
+            log.info(msg)
+            scene.redraws.append(msg)
+            scene.objects, redraws = [], 0
     return scene
 
 

@@ -212,12 +212,21 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile
     streams : dict
         The trial's generators (:func:`trial_streams`); ``"label"`` and ``"detector_seed"``
         are still unused.
+
+    Raises
+    ------
+    ValueError
+        When the scene cannot be made (:func:`graspsim.scene.make_scene`); the message names
+        the scene's index and seed.
     """
     from .profiles import get_profile
 
     prof = get_profile(profile)
     st = trial_streams(seed, index)
-    scene = make_scene(sim, specs, st["scene"], n_objects=n_objects, table=prof.table)
+    try:
+        scene = make_scene(sim, specs, st["scene"], n_objects=n_objects, table=prof.table)
+    except ValueError as exc:
+        raise ValueError(f"scene {index} of seed {seed}: {exc}") from None
     bodies = build_scene(sim, scene)
     frame = profile_capture(sim, scene, bodies, st["camera"], prof)
     return scene, bodies, frame, st

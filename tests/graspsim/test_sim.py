@@ -224,3 +224,53 @@ def test_settled_scene_reloads_at_rest(sim, box_spec):
     p1 = np.array(sim.client.getBasePositionAndOrientation(bodies.objects[0])[0])
     assert np.linalg.norm(p1 - p0) < 2e-3
     assert scene.objects[0].position[2] > 0.0
+
+
+def _settle_failing(monkeypatch, n_fail):
+    """``graspsim.scene.settle`` that reports "still moving" for its first ``n_fail`` calls
+    (all of them when None), then the real one; returns the list of calls' results."""
+    import graspsim.scene as scene_mod
+
+    real, calls = scene_mod.settle, []
+
+    def fake(sim, bodies, **kw):
+        ok = False if n_fail is None or len(calls) < n_fail else real(sim, bodies, **kw)
+        calls.append(ok)
+        return ok
+
+    monkeypatch.setattr(scene_mod, "settle", fake)
+    return calls
+
+
+def test_a_pile_that_does_not_rest_is_started_again(sim, box_spec, monkeypatch):
+    calls = _settle_failing(monkeypatch, 3)
+    scene = make_scene(sim, [box_spec], np.random.default_rng(3), n_objects=2,
+                       max_redraws=2, restarts=1)
+    assert len(scene.objects) == 2
+    assert calls[:3] == [False, False, False] and all(calls[3:])
+    assert len(scene.redraws) == 4  # three re-draws and the restart
+    assert "started again (1 of 1)" in scene.redraws[-1]
+
+
+def test_a_scene_that_never_rests_names_its_attempts(sim, box_spec, monkeypatch):
+    calls = _settle_failing(monkeypatch, None)
+    with pytest.raises(ValueError, match=r"3 re-draws in each of 3 attempts.*'box'"):
+        make_scene(sim, [box_spec], np.random.default_rng(3), max_redraws=2, restarts=2)
+    assert len(calls) == 9
+
+
+def test_restarts_do_not_change_a_scene_that_rests(sim, box_spec):
+    a = make_scene(sim, [box_spec], np.random.default_rng(5), n_objects=2, restarts=0)
+    b = make_scene(sim, [box_spec], np.random.default_rng(5), n_objects=2)
+    assert a.to_dict() == b.to_dict()
+
+
+def test_a_scene_that_cannot_be_made_is_named(sim, box_spec, monkeypatch):
+    import graspsim.trials as trials_mod
+
+    def fail(*args, **kwargs):
+        raise ValueError("could not make a scene: 21 re-draws")
+
+    monkeypatch.setattr(trials_mod, "make_scene", fail)
+    with pytest.raises(ValueError, match=r"^scene 4 of seed 9: could not make a scene"):
+        trials_mod.observe_scene(sim, [box_spec], 9, 4)
