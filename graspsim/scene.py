@@ -243,8 +243,8 @@ def make_scene(
     restarts : int
         Times the pile is started again from an empty table (with the next draws of ``rng``)
         when an object still does not rest after ``max_redraws`` re-draws: in a pile, an object
-        already placed can keep every new one from settling. A scene made without it is the
-        same as before this option existed.
+        already placed can keep every new one from settling. A scene that needs no restart
+        is the same whatever ``restarts`` is.
 
     Returns
     -------
