@@ -254,13 +254,20 @@ def table_surface(depth, depth_valid=None, stride: int = 4, n_iter: int = 100,
         Metres (the fitted surface extrapolated over the whole image); None when fewer than 50
         pixels are valid or no table is found.
     """
+    _, _, fit = _fit_table(depth, depth_valid, stride, n_iter, tol, random_state, degree, band)
+    return None if fit is None else fit[0]
+
+
+def _fit_table(depth, depth_valid, stride, n_iter, tol, random_state, degree, band):
+    """``(depth as float64, valid, (surface, table, sigma) or None)``: the table fit shared by
+    :func:`table_surface` and :func:`table_plane_mask` (None when fewer than 50 pixels are
+    valid or no table is found)."""
     depth = np.asarray(depth, dtype=np.float64)
     valid = valid_depth(depth, depth_valid)
     if valid.sum() < 50:
-        return None
-    fit = _table_surface(np.where(valid, depth, 1.0), valid, degree, stride, n_iter, tol, band,
-                         random_state)
-    return None if fit is None else fit[0]
+        return depth, valid, None
+    return depth, valid, _table_surface(np.where(valid, depth, 1.0), valid, degree, stride,
+                                        n_iter, tol, band, random_state)
 
 
 def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride: int = 4,
@@ -323,14 +330,10 @@ def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride:
     """
     if int(degree) != degree or degree < 1:
         raise ValueError(f"degree must be an integer >= 1, got {degree!r}")
-    depth = np.asarray(depth, dtype=np.float64)
-    valid = valid_depth(depth, depth_valid)
-    H, W = depth.shape
-    empty = np.zeros((H, W), dtype=bool)
-    fit = None if valid.sum() < 50 else _table_surface(
-        np.where(valid, depth, 1.0), valid, degree, stride, n_iter, tol, band, random_state)
-    region = empty if fit is None or not fit[1].any() else _standing_object(
-        depth, valid, *fit, min_height, min_area)
+    depth, valid, fit = _fit_table(depth, depth_valid, stride, n_iter, tol, random_state,
+                                   degree, band)
+    region = (np.zeros(depth.shape, dtype=bool) if fit is None or not fit[1].any()
+              else _standing_object(depth, valid, *fit, min_height, min_area))
     if return_surface:
         return region, None if fit is None else fit[0]
     return region
