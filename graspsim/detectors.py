@@ -293,7 +293,7 @@ _SPEC = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)
 
 
 def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
-               unseen_surface: bool = True) -> np.ndarray:
+               unseen_surface: bool = True, min_grip: float | None = None) -> np.ndarray:
     """Which rectangles this gripper can execute, judged from the observation alone.
 
     A rectangle passes when :func:`graspsim.grasp.rectangle_to_grasp` gives it a pose (depth
@@ -321,6 +321,10 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
         Metres (see :func:`graspsim.grasp.fingers_collide`).
     unseen_surface : bool
         Fingers must also miss the object's unseen surface (above).
+    min_grip : float or None
+        Metres. Judge each grasp as a harness with ``ExecutionParams(min_grip=...)`` executes it:
+        fingers that would meet a surface stop short of it if they still grip this much
+        (:func:`graspsim.grasp.settle_fingers`); None (the harness's default): they do not.
 
     Returns
     -------
@@ -328,7 +332,7 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
     """
     from dlsr.detection import fill_unseen_surface, table_plane_mask, table_surface
 
-    from .grasp import fingers_collide, rectangle_to_grasp
+    from .grasp import fingers_collide, rectangle_to_grasp, settle_fingers
 
     for key in ("depth", "K", "T_world_cam"):
         if obs.get(key) is None:
@@ -345,6 +349,9 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
     grasps = []
     for i, r in enumerate(rects):
         g = rectangle_to_grasp(r, depth, valid, obs["K"], obs["T_world_cam"])
+        if min_grip is not None:
+            g = settle_fingers(g, depth, valid, obs["K"], obs["T_world_cam"], table_depth,
+                               min_grip=min_grip)
         grasps.append(g)
         out[i] = g.failure is None and not fingers_collide(
             g, depth, valid, obs["K"], obs["T_world_cam"], table_depth, tolerance=tolerance)
@@ -384,14 +391,17 @@ class GripperAwareDetector:
         Metres (see :func:`graspsim.grasp.fingers_collide`).
     unseen_surface : bool
         See :func:`executable`.
+    min_grip : float or None
+        See :func:`executable`: set it to the harness's ``ExecutionParams.min_grip``.
     """
 
     def __init__(self, detector, keep: int = 5, tolerance: float = 0.003,
-                 unseen_surface: bool = True):
+                 unseen_surface: bool = True, min_grip: float | None = None):
         self.detector = detector
         self.keep = keep
         self.tolerance = tolerance
         self.unseen_surface = unseen_surface
+        self.min_grip = min_grip
 
     @property
     def requires_labels(self) -> bool:
@@ -403,16 +413,16 @@ class GripperAwareDetector:
         if not rects:
             return []
         ok = executable(rects, obs, tolerance=self.tolerance,
-                        unseen_surface=self.unseen_surface)
+                        unseen_surface=self.unseen_surface, min_grip=self.min_grip)
         return [r for r, k in zip(rects, ok, strict=True) if k][: self.keep]
 
     def __repr__(self):
         return (f"GripperAwareDetector({self.detector!r}, keep={self.keep}, "
-                f"unseen_surface={self.unseen_surface})")
+                f"unseen_surface={self.unseen_surface}, min_grip={self.min_grip})")
 
 
-def gripper_aware(detector, top_k: int = 40, keep: int = 5,
-                  unseen_surface: bool = True) -> GripperAwareDetector:
+def gripper_aware(detector, top_k: int = 40, keep: int = 5, unseen_surface: bool = True,
+                  min_grip: float | None = None) -> GripperAwareDetector:
     """``detector`` made aware of this gripper (:class:`GripperAwareDetector`).
 
     A DLSR grid detector (:class:`dlsr.detection.DenseDetector` or
@@ -432,6 +442,8 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5,
     keep : int
     unseen_surface : bool
         The fingers must also miss the object's unseen surface (:func:`executable`).
+    min_grip : float or None
+        As the harness's ``ExecutionParams.min_grip`` (:func:`executable`).
 
     Returns
     -------
@@ -455,7 +467,8 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5,
         detector.top_k = max(int(top_k), int(detector.top_k))
         if isinstance(detector, DenseDetector) and detector.rescore:
             detector.rescore = max(int(detector.rescore), detector.top_k)
-    return GripperAwareDetector(detector, keep=keep, unseen_surface=unseen_surface)
+    return GripperAwareDetector(detector, keep=keep, unseen_surface=unseen_surface,
+                                min_grip=min_grip)
 
 
 class PluginDetector:

@@ -36,8 +36,7 @@ from gymnasium import spaces
 from dlsr.metrics import rectangle_metric
 from dlsr.rectangles import GraspRectangle
 
-from .execution import execute_grasp, run_grasp
-from .grasp import rectangle_to_grasp
+from .execution import execute_grasp, harness_grasps, run_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
 from .scene import build_scene, make_scene
 from .sim import Simulation
@@ -157,7 +156,7 @@ class GraspEnv(gym.Env):
                     self.action_space.low, self.action_space.high)
         rect = GraspRectangle(*a)
         f = self._frame
-        grasp = rectangle_to_grasp(rect, f.depth, f.depth_valid, f.intrinsics, f.T_world_cam)
+        grasp = harness_grasps([rect], f, self._scene.table_z)[0]
         if grasp.failure is None:
             bodies = build_scene(self.sim, self._scene)
             res = execute_grasp(self.sim, self._scene, bodies, grasp)

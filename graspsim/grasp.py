@@ -30,7 +30,7 @@ Executors do not run a grasp that carries a failure reason.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -52,6 +52,8 @@ __all__ = [
     "central_depth",
     "nearest_depth",
     "fingers_collide",
+    "settle_fingers",
+    "table_plane_depth",
     "DEPTH_MISSING",
     "TOO_WIDE",
 ]
@@ -299,9 +301,18 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
     """
     if grasp.T_world_grasp is None:
         return True
+    fp = _finger_footprint(grasp, depth, intrinsics, T_world_cam, samples)
+    if fp is None:
+        return True
+    d, ok, tip = _footprint_depths(fp, depth, valid, table_depth, tip_clearance)
+    return bool(np.any(d[ok] < tip - tolerance))
+
+
+def _finger_footprint(grasp: Grasp, depth, intrinsics, T_world_cam, samples):
+    """Pixels ``(v, u)`` of both fingers' footprints and the fingertips' camera depth before
+    any table clamp; None when a point falls outside the image or behind the camera."""
     K = check_camera_matrix(intrinsics, "intrinsics")
-    depth = np.asarray(depth)
-    H, W = depth.shape
+    H, W = np.shape(depth)
     T_cam_grasp = np.linalg.inv(np.asarray(T_world_cam, dtype=float)) @ grasp.T_world_grasp
     R, o = T_cam_grasp[:3, :3], T_cam_grasp[:3, 3]
     a = (grasp.opening / 2 + np.linspace(0.0, FINGER_THICKNESS, samples[0]))[:, None]
@@ -309,13 +320,103 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
     A = np.concatenate([a, -a]) * np.ones_like(b)
     B = np.ones_like(a.repeat(2, axis=0)) * b
     P = o + A.reshape(-1, 1) * R[:, 0] + B.reshape(-1, 1) * R[:, 1]  # footprint at the TCP
+    if P[:, 2].min() <= 0:
+        return None
     u = np.rint(K[0, 0] * P[:, 0] / P[:, 2] + K[0, 2]).astype(np.intp)
     v = np.rint(K[1, 1] * P[:, 1] / P[:, 2] + K[1, 2]).astype(np.intp)
-    if P[:, 2].min() <= 0 or u.min() < 0 or u.max() >= W or v.min() < 0 or v.max() >= H:
-        return True
-    tip = o[2] + TIP_OFFSET * R[2, 2]
+    if u.min() < 0 or u.max() >= W or v.min() < 0 or v.max() >= H:
+        return None
+    return v, u, o[2] + TIP_OFFSET * R[2, 2], R[2, 2]
+
+
+def _footprint_depths(fp, depth, valid, table_depth, tip_clearance):
+    """The footprint's depths, which of them are valid, and the fingertips' final camera depth
+    (clamped ``tip_clearance`` above the table when ``table_depth`` is given)."""
+    v, u, tip, _ = fp
     if table_depth is not None:
         tip = min(tip, float(np.min(np.asarray(table_depth)[v, u])) - tip_clearance)
-    d = depth[v, u].astype(float)  # only the footprint's pixels: called per candidate
+    d = np.asarray(depth)[v, u].astype(float)  # only the footprint's pixels: called per candidate
     ok = np.asarray(valid)[v, u].astype(bool) & np.isfinite(d) & (d > 0)
-    return bool(np.any(d[ok] < tip - tolerance))
+    return d, ok, tip
+
+
+def settle_fingers(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_depth=None,
+                   min_grip: float = 0.01, clearance: float = 0.002, tolerance: float = 0.003,
+                   tip_clearance: float = 0.001, samples: tuple[int, int] = (9, 21)) -> Grasp:
+    """Stop the fingers short of a surface they would meet on the way down, if they still grip.
+
+    Where :func:`fingers_collide` finds a surface seen in a finger's footprint more than
+    ``tolerance`` in front of where the fingertips end (the bottom of a bowl under the inner
+    finger, the plate or the bowl a small object rests on), the grasp is moved back along its
+    approach so that the fingertips stop ``clearance`` short of the nearest such surface --
+    provided they still reach ``min_grip`` beyond the surface under the rectangle's centre
+    (``grasp.depth``). Otherwise, or when nothing is in the way, the grasp is returned unchanged
+    (and :func:`fingers_collide` still finds the collision). The opening and the closing
+    direction are kept. Like the fingers check, only the depth image is used.
+
+    Parameters
+    ----------
+    grasp : Grasp
+        From :func:`rectangle_to_grasp` (returned as it is when it has no pose or a failure).
+    depth : ndarray of shape (H, W), float
+        Metres, 0 where missing.
+    valid : ndarray of shape (H, W), bool
+    intrinsics : CameraIntrinsics or ndarray of shape (3, 3)
+    T_world_cam : ndarray of shape (4, 4)
+    table_depth : ndarray of shape (H, W) or None
+        The table's camera depth at every pixel, metres (:func:`table_plane_depth` from a known
+        plane, or :func:`dlsr.detection.table_surface` fitted to the depth); the fingertips stop
+        ``tip_clearance`` above it as the executor clamps them. None: no table clamp.
+    min_grip, clearance, tolerance, tip_clearance : float
+        Metres.
+    samples : (int, int)
+        As :func:`fingers_collide`.
+
+    Returns
+    -------
+    Grasp
+    """
+    if grasp.T_world_grasp is None or grasp.failure is not None or not np.isfinite(grasp.depth):
+        return grasp
+    fp = _finger_footprint(grasp, depth, intrinsics, T_world_cam, samples)
+    if fp is None:
+        return grasp
+    d, ok, tip = _footprint_depths(fp, depth, valid, table_depth, tip_clearance)
+    hit = d[ok & (d < tip - tolerance)]
+    if not hit.size:
+        return grasp
+    new_tip = float(hit.min()) - clearance
+    if new_tip - grasp.depth < min_grip:
+        return grasp
+    back = (fp[2] - new_tip) / fp[3]  # along the approach, from the unclamped fingertips
+    T = np.array(grasp.T_world_grasp, dtype=float)
+    T[:3, 3] -= back * T[:3, 2]
+    return replace(grasp, T_world_grasp=T)
+
+
+def table_plane_depth(intrinsics, T_world_cam, table_z: float, shape) -> np.ndarray:
+    """Camera depth (metres) of the horizontal plane ``z = table_z`` at every pixel.
+
+    Parameters
+    ----------
+    intrinsics : CameraIntrinsics or ndarray of shape (3, 3)
+    T_world_cam : ndarray of shape (4, 4)
+    table_z : float
+        Height of the table's top in the world, metres.
+    shape : (int, int)
+        ``(H, W)`` of the image.
+
+    Returns
+    -------
+    ndarray of shape (H, W), float64
+        ``inf`` where the pixel's ray does not meet the plane in front of the camera.
+    """
+    K = check_camera_matrix(intrinsics, "intrinsics")
+    T = np.asarray(T_world_cam, dtype=float)
+    H, W = shape
+    v, u = np.mgrid[0:H, 0:W]
+    rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((H, W))], -1)
+    down = rays @ T[2, :3]  # world z change per unit of camera depth
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (table_z - T[2, 3]) / down
+    return np.where(np.isfinite(z) & (z > 0), z, np.inf)

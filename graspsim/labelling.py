@@ -24,8 +24,7 @@ from dlsr.detection.lattice import max_width_px as _max_width_px
 from dlsr.detection.physical import mask_axes
 from dlsr.rectangles import GraspRectangle
 
-from .execution import ExecutionParams, GraspResult, precheck_grasps, run_grasp
-from .grasp import rectangle_to_grasp
+from .execution import ExecutionParams, GraspResult, harness_grasps, precheck_grasps, run_grasp
 from .gripper import MAX_OPENING
 
 __all__ = [
@@ -300,10 +299,7 @@ def label_rectangles(sim, scene, frame, candidates, params: ExecutionParams | No
     Labelled
         Results decided without stepping have ``steps == 0``.
     """
-    depth = frame.depth if depth is None else depth
-    valid = frame.depth_valid if depth_valid is None else depth_valid
-    grasps = [rectangle_to_grasp(r, depth, valid, frame.intrinsics, frame.T_world_cam)
-              for r in candidates]
+    grasps = harness_grasps(candidates, frame, scene.table_z, params, depth, depth_valid)
     if not fast:
         return Labelled(list(candidates), [run_grasp(sim, scene, g, params) for g in grasps])
     p = replace(ExecutionParams() if params is None else params, hold_until_still=True)

@@ -50,8 +50,7 @@ from dlsr.records import (
 )
 
 from .detectors import check_detections, load_detector, one_line
-from .execution import ExecutionParams, execute_grasp, run_grasp
-from .grasp import rectangle_to_grasp
+from .execution import ExecutionParams, execute_grasp, harness_grasps, run_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
 from .objects import ObjectSpec, builtin_objects
 from .scene import build_scene, capture, make_scene
@@ -348,8 +347,7 @@ def _execute(sim, scene, frame, rects, scores, error, positives, params):
                       metric=None if positives is None else False)
         return fields, None, None
     rect = rects[0]
-    g = rectangle_to_grasp(rect, frame.depth, frame.depth_valid, frame.intrinsics,
-                           frame.T_world_cam)
+    g = harness_grasps([rect], frame, scene.table_z, params)[0]
     if g.failure is not None:
         res, bodies = run_grasp(sim, scene, g, params), None
     else:

@@ -8,8 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .execution import run_grasp
-from .grasp import rectangle_to_grasp
+from .execution import harness_grasps, run_grasp
 
 __all__ = ["side_camera_pose", "trial_frames", "save_strip", "save_gif"]
 
@@ -71,8 +70,7 @@ def trial_frames(sim, scene, frame, rect, size=(320, 240)):
         np.clip(rect.y - 120, 0, obs.shape[0] - 240))
     crop = obs[y0:y0 + 240, x0:x0 + 320]
     frames = [_label(cv2.resize(crop, (W, H), interpolation=cv2.INTER_AREA), "observation")]
-    g = rectangle_to_grasp(rect, frame.depth, frame.depth_valid, frame.intrinsics,
-                           frame.T_world_cam)
+    g = harness_grasps([rect], frame, scene.table_z)[0]
     if g.failure is not None:
         return frames, run_grasp(sim, scene, g)
     target = g.position + np.array([0.0, 0.0, 0.09])

@@ -20,8 +20,7 @@ import time
 
 import numpy as np
 
-from graspsim.execution import ExecutionParams, run_grasp
-from graspsim.grasp import rectangle_to_grasp
+from graspsim.execution import ExecutionParams, harness_grasps, run_grasp
 from graspsim.labelling import label_rectangles, sample_candidates
 from graspsim.scene import build_scene, capture, make_scene
 from graspsim.sim import Simulation
@@ -80,8 +79,7 @@ def motion_reference(positives):
         t = time.perf_counter()
         ok = []
         for scene, frame, rect in positives:
-            g = rectangle_to_grasp(rect, frame.depth, frame.depth_valid, frame.intrinsics,
-                                   frame.T_world_cam)
+            g = harness_grasps([rect], frame, scene.table_z, params)[0]
             ok.append(run_grasp(sim, scene, g, params).success)
         out[name] = ((time.perf_counter() - t) / max(len(positives), 1), np.array(ok))
     sim.close()

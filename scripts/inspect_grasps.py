@@ -26,8 +26,7 @@ from scipy.spatial.transform import Rotation
 
 from dlsr.records import read_jsonl
 from dlsr.rectangles import GraspRectangle
-from graspsim.execution import ExecutionParams, execute_grasp
-from graspsim.grasp import rectangle_to_grasp
+from graspsim.execution import ExecutionParams, execute_grasp, harness_grasps
 from graspsim.scene import build_scene
 from graspsim.sim import Simulation
 from graspsim.trials import observe_scene, resolve_objects
@@ -40,8 +39,7 @@ def _mm(v) -> list[float]:
 def inspect_trial(sim, specs, seed: int, index: int, n_objects: int, rect, params) -> dict:
     """Execute one recorded rectangle in its rebuilt scene; the per-phase record (see above)."""
     scene, _, frame, _ = observe_scene(sim, specs, seed, index, n_objects)
-    grasp = rectangle_to_grasp(GraspRectangle(*rect), frame.depth, frame.depth_valid,
-                               frame.intrinsics, frame.T_world_cam)
+    grasp = harness_grasps([GraspRectangle(*rect)], frame, scene.table_z, params)[0]
     bodies = build_scene(sim, scene)
     c = sim.client
     q0 = [Rotation.from_quat(c.getBasePositionAndOrientation(b)[1]) for b in bodies.objects]

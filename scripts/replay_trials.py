@@ -22,8 +22,7 @@ from pathlib import Path
 
 from dlsr.records import read_jsonl
 from dlsr.rectangles import GraspRectangle
-from graspsim.execution import ExecutionParams, run_grasp
-from graspsim.grasp import rectangle_to_grasp
+from graspsim.execution import ExecutionParams, harness_grasps, run_grasp
 from graspsim.sim import Simulation
 from graspsim.trials import observe_scene, resolve_objects
 
@@ -72,8 +71,7 @@ def main(argv=None) -> int:
             if rect is None:
                 outcomes[name][i] = recs[i]["reason"]
                 continue
-            g = rectangle_to_grasp(GraspRectangle(*rect), frame.depth, frame.depth_valid,
-                                   frame.intrinsics, frame.T_world_cam, **gkw)
+            g = harness_grasps([GraspRectangle(*rect)], frame, scene.table_z, params, **gkw)[0]
             outcomes[name][i] = run_grasp(sim, scene, g, params).reason
 
     summary = {}

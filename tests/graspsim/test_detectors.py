@@ -146,3 +146,23 @@ def test_gripper_aware_tells_a_dlsr_detector_to_search_clear_jaws_within_reach(s
     other = gripper_aware(MaskPCADetector())
     assert isinstance(other.detector, MaskPCADetector) and not other.requires_labels
     assert gripper_aware(OracleDetector()).requires_labels  # the harness then labels the scene
+
+
+def test_gripper_aware_judges_grasps_whose_fingers_settle_as_the_harness_executes_them():
+    """A 2 cm block on a 2 cm plate that reaches beyond the fingers: the fingers of a grasp
+    across the block come down 2.5 cm past its top and meet the plate, unless (``min_grip``)
+    they stop above it, still gripping 1.8 cm of the block."""
+    from dlsr.rectangles import GraspRectangle
+    from graspsim.detectors import GripperAwareDetector, executable
+
+    obs = _look_down_obs()
+    depth = np.full((480, 640), 0.75, np.float32)
+    depth[140:340, 200:440] = 0.73  # the plate
+    depth[220:260, 300:340] = 0.71  # the block, 40 px = 5.2 cm square at its top
+    obs["depth"] = depth
+    across = GraspRectangle(320, 240, 0.0, 52, 20)
+    assert executable([across], obs).tolist() == [False]
+    assert executable([across], obs, min_grip=0.01).tolist() == [True]
+    assert executable([across], obs, min_grip=0.025).tolist() == [False]  # too little left
+    assert GripperAwareDetector(_Fixed([across])).predict(obs) == []
+    assert GripperAwareDetector(_Fixed([across]), min_grip=0.01).predict(obs) == [across]

@@ -13,6 +13,8 @@ from graspsim.grasp import (
     fingers_collide,
     nearest_depth,
     rectangle_to_grasp,
+    settle_fingers,
+    table_plane_depth,
 )
 from graspsim.gripper import FINGER_THICKNESS, PAD_WIDTH, PALM_OFFSET, TIP_OFFSET
 
@@ -271,3 +273,87 @@ def test_a_surface_on_any_pixel_of_a_finger_footprint_is_a_collision():
         if not fingers_collide(g, pinned, valid, K, T, table):
             missed.append((u, v))
     assert missed == []
+
+
+def test_table_plane_depth_back_projects_onto_the_plane():
+    T = look_down(0.75)
+    np.testing.assert_allclose(table_plane_depth(K, T, 0.0, (48, 64)), 0.75)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        T = tilted(rng)
+        d = table_plane_depth(K, T, 0.02, (480, 640))
+        v, u = rng.integers(0, 480, 50), rng.integers(0, 640, 50)
+        z = d[v, u]
+        p_cam = np.stack([(u - CX) / F * z, (v - CY) / F * z, z, np.ones_like(z)])
+        np.testing.assert_allclose((T @ p_cam)[2], 0.02, atol=1e-9)
+    up = np.eye(4)  # looking straight up: the rays never meet the plane below
+    assert np.isinf(table_plane_depth(K, up, -1.0, (4, 4))).all()
+
+
+def _block_on_plate(top=0.71, plate=0.73):
+    """A block resting on a plate that reaches beyond the fingers, on a table at 0.75 m."""
+    depth, valid = _block(top=top)
+    depth[150:330, 230:410][depth[150:330, 230:410] > plate] = plate
+    return depth, valid
+
+
+def test_fingers_settle_above_the_support_when_they_still_grip():
+    depth, valid = _block_on_plate()
+    T, table = look_down(0.75), np.full((480, 640), 0.75)
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 52.0, 20.0), depth, valid, K, T)
+    assert fingers_collide(g, depth, valid, K, T, table)  # the tips go 2.5 cm past the top
+    s = settle_fingers(g, depth, valid, K, T, table, min_grip=0.01, clearance=0.002)
+    assert not fingers_collide(s, depth, valid, K, T, table)
+    tip = 0.75 - s.position[2] + TIP_OFFSET  # the fingertips' camera depth
+    assert tip == pytest.approx(0.73 - 0.002, abs=1e-6)
+    np.testing.assert_allclose(s.T_world_grasp[:3, :3], g.T_world_grasp[:3, :3])
+    assert (s.opening, s.width, s.depth, s.rect) == (g.opening, g.width, g.depth, g.rect)
+    assert g.position[2] == pytest.approx(0.75 - 0.71 - 0.015, abs=1e-6)  # input unchanged
+
+
+def test_fingers_do_not_settle_when_too_little_of_the_object_is_left_to_grip():
+    depth, valid = _block_on_plate(top=0.725)  # 5 mm above the plate
+    T, table = look_down(0.75), np.full((480, 640), 0.75)
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 52.0, 20.0), depth, valid, K, T)
+    s = settle_fingers(g, depth, valid, K, T, table, min_grip=0.01)
+    assert s is g and fingers_collide(s, depth, valid, K, T, table)
+    s = settle_fingers(g, depth, valid, K, T, table, min_grip=0.002)
+    assert not fingers_collide(s, depth, valid, K, T, table)
+
+
+def test_fingers_with_nothing_in_the_way_or_without_a_pose_are_left_as_they_are():
+    depth, valid = _block()
+    T, table = look_down(0.75), np.full((480, 640), 0.75)
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 52.0, 20.0), depth, valid, K, T)
+    assert settle_fingers(g, depth, valid, K, T, table) is g
+    # A thin object: the tips stop at the table (the executor's clamp), not a collision.
+    flat_depth, flat_valid = _block(top=0.742)
+    g = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 52.0, 20.0), flat_depth, flat_valid,
+                           K, T)
+    assert settle_fingers(g, flat_depth, flat_valid, K, T, table) is g
+    none = rectangle_to_grasp(GraspRectangle(CX, CY, 0.0, 40.0, 20.0), depth,
+                              np.zeros_like(valid), K, T)
+    assert settle_fingers(none, depth, valid, K, T, table) is none
+
+
+def test_the_harness_settles_the_fingers_only_when_asked():
+    from types import SimpleNamespace
+
+    from graspsim.execution import ExecutionParams, harness_grasps
+
+    depth, valid = _block_on_plate()
+    frame = SimpleNamespace(depth=depth, depth_valid=valid, intrinsics=K,
+                            T_world_cam=look_down(0.75))
+    rects = [GraspRectangle(CX, CY, 0.0, 52.0, 20.0), GraspRectangle(CX, CY, 0.0, 20.0, 20.0)]
+    plain = harness_grasps(rects, frame, 0.0)
+    for g, r in zip(plain, rects, strict=True):
+        ref = rectangle_to_grasp(r, depth, valid, K, frame.T_world_cam)
+        np.testing.assert_array_equal(g.T_world_grasp, ref.T_world_grasp)
+    settled = harness_grasps(rects, frame, 0.0, ExecutionParams(min_grip=0.01))
+    table = table_plane_depth(K, frame.T_world_cam, 0.0, depth.shape)
+    assert settled[0].position[2] > plain[0].position[2] + 0.005  # stopped above the plate
+    assert not fingers_collide(settled[0], depth, valid, K, frame.T_world_cam, table)
+    # the narrow one lands on the block's own top: nothing to grip below it, left as it was
+    np.testing.assert_array_equal(settled[1].T_world_grasp, plain[1].T_world_grasp)
+    offset = harness_grasps(rects[:1], frame, 0.0, depth_offset=0.005)[0]
+    assert offset.position[2] == pytest.approx(plain[0].position[2] + 0.01, abs=1e-6)
