@@ -41,6 +41,7 @@ from .trials import (
     _campaign_setup,
     _detector_name,
     _execute,
+    _execution_line,
     _label_and_propose,
     _planning_line,
     _worker_sim,
@@ -226,7 +227,8 @@ def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, 
     dict
         The summary (see :func:`summarize_rounds`), with ``records`` sorted by index.
     """
-    det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config)
+    det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config,
+                                       params)
     if config.n_objects < 1:
         raise ValueError(f"objects per scene must be >= 1, got {config.n_objects}")
     meta["mode"] = "declutter"
@@ -337,6 +339,7 @@ def rounds_markdown(s: dict) -> str:
         f"- rectangle-metric accuracy of the executed grasps: {pct(s['metric_accuracy'])} "
         f"(n = {s['metric_n']})",
         _planning_line(s.get("planning_seconds")),
+        *filter(None, [_execution_line(s)]),
         "",
         "| round ended by | rounds |",
         "|---|---|",

@@ -24,7 +24,8 @@ listed in ``info["fell_off"]``), the others settle and a new observation is rend
 update of :func:`graspsim.declutter.scene_after_grasp`); the episode terminates when the table
 is empty and is truncated by the ``max_episode_steps`` of the registration. Every random value
 comes from ``self.np_random`` (seeded by ``reset(seed=...)``), so the same seed gives the same
-observations and outcomes.
+observations and outcomes. ``execution`` (a :class:`graspsim.execution.ExecutionParams`) sets
+how grasps are executed and labelled, as for trials (e.g. ``ExecutionParams(min_grip=0.01)``).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from gymnasium import spaces
 from dlsr.metrics import rectangle_metric
 from dlsr.rectangles import GraspRectangle
 
-from .execution import execute_grasp, harness_grasps, run_grasp
+from .execution import ExecutionParams, execute_grasp, harness_grasps, run_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
 from .scene import build_scene, make_scene
 from .sim import Simulation
@@ -65,18 +66,25 @@ class GraspEnv(gym.Env):
         How scenes are seen: camera height and intrinsics, table colour, lighting ranges and
         depth noise (:mod:`graspsim.profiles`, e.g. ``"jacquard"``); None: the default. The
         observation space follows its image size.
+    execution : graspsim.execution.ExecutionParams or None
+        How grasps are executed (and labelled); None: the harness's defaults.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
 
     def __init__(self, render_mode=None, objects="test", n_objects=None, declutter=False,
-                 n_candidates=32, noise=None, profile=None):
+                 n_candidates=32, noise=None, profile=None, execution=None):
         from .profiles import get_profile
         from .trials import resolve_objects
 
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if execution is not None and not isinstance(execution, ExecutionParams):
+            raise TypeError(f"execution must be an ExecutionParams or None, got "
+                            f"{type(execution).__name__}")
         self.render_mode = render_mode
+        self.execution = execution
+        self._params = ExecutionParams() if execution is None else execution
         self.specs = resolve_objects(objects)
         self.declutter = bool(declutter)
         self.n_objects = (5 if declutter else 1) if n_objects is None else int(n_objects)
@@ -128,7 +136,7 @@ class GraspEnv(gym.Env):
         # executes exactly the labelled grasp (light objects in marginal grasps are chaotic).
         cands = [GraspRectangle(*r.as_array().astype(np.float32).astype(np.float64))
                  for r in cands]
-        labelled = label_rectangles(self.sim, self._scene, f, cands)
+        labelled = label_rectangles(self.sim, self._scene, f, cands, self._params)
         self._positives = rank_positives(labelled)
 
     # --- gymnasium API ---------------------------------------------------------------------
@@ -156,12 +164,12 @@ class GraspEnv(gym.Env):
                     self.action_space.low, self.action_space.high)
         rect = GraspRectangle(*a)
         f = self._frame
-        grasp = harness_grasps([rect], f, self._scene.table_z)[0]
+        grasp = harness_grasps([rect], f, self._scene.table_z, self._params)[0]
         if grasp.failure is None:
             bodies = build_scene(self.sim, self._scene)
-            res = execute_grasp(self.sim, self._scene, bodies, grasp)
+            res = execute_grasp(self.sim, self._scene, bodies, grasp, self._params)
         else:  # nothing moves
-            bodies, res = None, run_grasp(self.sim, self._scene, grasp)
+            bodies, res = None, run_grasp(self.sim, self._scene, grasp, self._params)
         info = {
             "success": bool(res.success),
             "failure_reason": res.reason,

@@ -41,7 +41,7 @@ stopped moving in the hand.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -59,6 +59,8 @@ from .scene import Scene, SceneBodies, build_scene
 __all__ = [
     "ExecutionParams",
     "GraspResult",
+    "execution_changes",
+    "execution_params_from_dict",
     "execute_grasp",
     "harness_grasps",
     "precheck_grasps",
@@ -103,6 +105,58 @@ class ExecutionParams:
     still_tolerance: float = 2e-4
     still_checks: int = 2
     min_grip: float | None = None
+
+    def __post_init__(self):
+        if self.min_grip is not None and not float(self.min_grip) >= 0:
+            raise ValueError(f"ExecutionParams.min_grip must be None or >= 0 metres, "
+                             f"got {self.min_grip!r}")
+
+
+def execution_params_from_dict(d, where: str) -> ExecutionParams:
+    """The :class:`ExecutionParams` that ``dataclasses.asdict`` (as saved in JSON) describes.
+
+    Fields ``d`` lacks take their defaults (a file written before the field existed ran with
+    it); a field this version does not know, or a value it refuses, is a ValueError naming
+    ``where`` (the file).
+
+    Parameters
+    ----------
+    d : dict
+    where : str
+
+    Returns
+    -------
+    ExecutionParams
+    """
+    if not isinstance(d, dict) or not isinstance(d.get("gripper", {}), dict):
+        raise ValueError(f"{where}: the execution parameters are not a JSON object of "
+                         f"ExecutionParams fields (got {d!r:.80})")
+    d = dict(d)
+    try:
+        if "gripper" in d:
+            d["gripper"] = GripperParams(**d["gripper"])
+        return ExecutionParams(**d)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: the execution parameters do not match this graspsim's "
+                         f"ExecutionParams ({exc})") from None
+
+
+def execution_changes(params: ExecutionParams | None) -> dict:
+    """The fields of ``params`` that differ from the defaults, ``{name: value}``.
+
+    A gripper field is named ``gripper.<field>``; None (the defaults) gives ``{}``.
+    """
+    if params is None:
+        return {}
+    default, out = ExecutionParams(), {}
+    for f in fields(ExecutionParams):
+        a, b = getattr(params, f.name), getattr(default, f.name)
+        if f.name == "gripper":
+            out.update({f"gripper.{k}": v for k, v in asdict(a).items()
+                        if v != asdict(b)[k]})
+        elif a != b:
+            out[f.name] = a
+    return out
 
 
 @dataclass

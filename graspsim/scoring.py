@@ -165,16 +165,11 @@ def manifest_specs(manifest: dict) -> dict:
 
 def execution_params(manifest: dict):
     """The :class:`graspsim.execution.ExecutionParams` the dataset was labelled with."""
-    from .execution import ExecutionParams
-    from .gripper import GripperParams
+    from .execution import execution_params_from_dict
 
-    d = dict(manifest["execution"])
-    try:
-        d["gripper"] = GripperParams(**d["gripper"])
-        return ExecutionParams(**d)
-    except (TypeError, KeyError) as exc:
-        raise ValueError("scenes.json: the execution parameters do not match this graspsim's "
-                         f"ExecutionParams ({exc!r})") from None
+    if "execution" not in manifest:
+        raise ValueError("scenes.json: no 'execution' parameters")
+    return execution_params_from_dict(manifest["execution"], "scenes.json")
 
 
 def rebuild_scene(entry: dict, specs: dict):

@@ -23,7 +23,10 @@ Output folder (``out``):
   configuration in an existing folder is refused. Each record has the detector's planning time
   (``planning_seconds``, the wall time of ``predict``) and, when it gave scores, the executed
   rectangle's ``score``.
-* ``config.json``: the run's arguments.
+* ``config.json``: the run's arguments, the execution parameters among them (``execution``,
+  :class:`graspsim.execution.ExecutionParams` as a dict; read it back with
+  :func:`campaign_execution_params`). A resume with other arguments is refused; a folder written
+  before the execution parameters were recorded ran with the defaults.
 * ``summary.json`` and ``summary.md``: physical success rate with a Wilson 95 % interval,
   rectangle-metric accuracy on the same trials, the 2x2 table of metric verdict against physical
   outcome, failure reasons, planning time (median and 95th percentile), trials per second.
@@ -50,7 +53,14 @@ from dlsr.records import (
 )
 
 from .detectors import check_detections, load_detector, one_line
-from .execution import ExecutionParams, execute_grasp, harness_grasps, run_grasp
+from .execution import (
+    ExecutionParams,
+    execute_grasp,
+    execution_changes,
+    execution_params_from_dict,
+    harness_grasps,
+    run_grasp,
+)
 from .labelling import label_rectangles, rank_positives, sample_candidates
 from .objects import ObjectSpec, builtin_objects
 from .scene import build_scene, capture, make_scene
@@ -68,6 +78,7 @@ __all__ = [
     "observation",
     "propose",
     "planning_stats",
+    "campaign_execution_params",
 ]
 
 log = logging.getLogger(__name__)
@@ -464,6 +475,10 @@ def _open_campaign(out, meta: dict, filename: str):
         if isinstance(old.get("config"), dict):
             # A folder written before a TrialConfig field existed ran with its default.
             old["config"] = {**asdict(TrialConfig()), **old["config"]}
+        if "execution" in meta:
+            # Folders written before the execution parameters were recorded ran the defaults.
+            old["execution"] = asdict(execution_params_from_dict(old.get("execution", {}),
+                                                                 str(cfg_path)))
         if {k: old.get(k) for k in meta} != json.loads(json.dumps(meta)):
             raise ValueError(
                 f"{out} holds trials of another configuration ({cfg_path}); use a new folder"
@@ -493,16 +508,51 @@ def _run_missing(fn, tasks, done: dict, jsonl, executor, desc: str) -> int:
     return new
 
 
-def _campaign_setup(detector, detector_name, objects, n: int, seed: int, config):
+def _campaign_setup(detector, detector_name, objects, n: int, seed: int, config, params):
     """The detector, the object specs and the arguments a campaign folder records
-    (``config.json``) for :func:`run_trials` and :func:`graspsim.declutter.run_rounds`."""
+    (``config.json``, with the execution parameters) for :func:`run_trials` and
+    :func:`graspsim.declutter.run_rounds`."""
     det, det_name = _resolve(detector, detector_name)
     specs = resolve_objects(objects)
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
     meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
-            else [s.name for s in specs], "seed": seed, "config": asdict(config)}
+            else [s.name for s in specs], "seed": seed, "config": asdict(config),
+            "execution": asdict(ExecutionParams() if params is None else params)}
     return det, specs, meta
+
+
+def campaign_execution_params(folder) -> ExecutionParams:
+    """The execution parameters a trial or clutter-round folder ran with.
+
+    Read from its ``config.json`` (the defaults for a folder written before they were
+    recorded), so that a replay executes what the campaign executed.
+
+    Parameters
+    ----------
+    folder : str or Path
+        A :func:`run_trials` or :func:`graspsim.declutter.run_rounds` output folder.
+
+    Returns
+    -------
+    ExecutionParams
+    """
+    path = Path(folder) / "config.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: not found (not a trial folder)")
+    cfg = read_json(path, "trials configuration")
+    return execution_params_from_dict(cfg.get("execution", {}), str(path))
+
+
+def _execution_line(s: dict) -> str | None:
+    """The summary line naming the execution parameters that differ from the defaults."""
+    if not isinstance(s.get("execution"), dict):
+        return None
+    changes = execution_changes(execution_params_from_dict(s["execution"], "summary"))
+    if not changes:
+        return None
+    return ("- execution parameters other than the defaults: "
+            + ", ".join(f"{k} = {v}" for k, v in changes.items()))
 
 
 def _resolve(detector, detector_name):
@@ -552,7 +602,8 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     dict
         The summary (see :func:`summarize`), with ``records`` sorted by index.
     """
-    det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config)
+    det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config,
+                                       params)
     return _campaign(_trial_task, "trials", meta, out, n, [specs, det, seed, config, params],
                      executor, n_jobs, progress, summarize, summary_markdown)
 
@@ -665,6 +716,7 @@ def summary_markdown(s: dict) -> str:
         f"- trials per second (this run): {tps} with {s.get('n_jobs')} job(s); "
         f"mean {s['seconds_per_trial'] or 0:.2f} s per trial per worker",
         _planning_line(s.get("planning_seconds")),
+        *filter(None, [_execution_line(s)]),
         "",
         "| rectangle metric \\ physics | success | failure |",
         "|---|---|---|",

@@ -2,12 +2,12 @@
 
 For harness diagnoses (why a thin object slips, what a collision hits): trial ``i``'s scene is
 rebuilt (:func:`graspsim.trials.observe_scene`), its recorded rectangle executed with the current
-harness, and at the end of each phase (pregrasp, approach, close, lift, hold) one JSON line per
-trial records, in the gripper frame (x closing, z approach, TCP at 0, fingertips at +10 mm,
-palm at -40 mm): the object's roll about its own x axis and tilt since the start (degrees), its
-height (m), its centre (mm), the opening between the pads (mm), and per pad (0, 1) the contact
-points with the object (mm) and their summed normal force (N); at the approach, every contact of
-the gripper (``palm`` or ``finger0/1``, with ``object`` or ``table``).
+harness and the folder's execution parameters, and at the end of each phase (pregrasp, approach,
+close, lift, hold) one JSON line per trial records, in the gripper frame (x closing, z approach,
+TCP at 0, fingertips at +10 mm, palm at -40 mm): the object's roll about its own x axis and tilt
+since the start (degrees), its height (m), its centre (mm), the opening between the pads (mm), and
+per pad (0, 1) the contact points with the object (mm) and their summed normal force (N); at the
+approach, every contact of the gripper (``palm`` or ``finger0/1``, with ``object`` or ``table``).
 
     .venv/bin/python scripts/inspect_grasps.py runs/default/trials/mask-pca \\
         --objects chopstick [--tip-clearance 0.001] [--out chopstick.jsonl]
@@ -26,10 +26,10 @@ from scipy.spatial.transform import Rotation
 
 from dlsr.records import read_jsonl
 from dlsr.rectangles import GraspRectangle
-from graspsim.execution import ExecutionParams, execute_grasp, harness_grasps
+from graspsim.execution import execute_grasp, harness_grasps
 from graspsim.scene import build_scene
 from graspsim.sim import Simulation
-from graspsim.trials import observe_scene, resolve_objects
+from graspsim.trials import campaign_execution_params, observe_scene, resolve_objects
 
 
 def _mm(v) -> list[float]:
@@ -94,7 +94,7 @@ def main(argv=None) -> int:
     cfg = json.loads(cfg_path.read_text())
     records = {int(r["index"]): r for r in read_jsonl(args.folder / "trials.jsonl")}
     keep = None if args.objects is None else set(args.objects.split(","))
-    params = ExecutionParams()
+    params = campaign_execution_params(args.folder)
     if args.tip_clearance is not None:
         params = dataclasses.replace(params, tip_clearance=args.tip_clearance)
     sim = Simulation()

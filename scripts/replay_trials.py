@@ -2,8 +2,9 @@
 
 Paired harness experiments: trial ``i`` of every folder of one run (same seed and objects) is the
 same scene, rebuilt exactly by :func:`graspsim.trials.observe_scene`; each folder's recorded
-rectangle is turned into a grasp and executed again with the current harness, optionally with
-one execution or grasp parameter changed. The oracle's rectangles are replayed as recorded (they
+rectangle is turned into a grasp and executed again with the current harness and the execution
+parameters the folder recorded (``config.json``), optionally with one execution or grasp
+parameter changed. The oracle's rectangles are replayed as recorded (they
 were labelled under the harness of the original run). Printed: per folder, successes and failure
 reasons, and the trials gained and lost against the recorded outcomes.
 
@@ -22,9 +23,9 @@ from pathlib import Path
 
 from dlsr.records import read_jsonl
 from dlsr.rectangles import GraspRectangle
-from graspsim.execution import ExecutionParams, harness_grasps, run_grasp
+from graspsim.execution import harness_grasps, run_grasp
 from graspsim.sim import Simulation
-from graspsim.trials import observe_scene, resolve_objects
+from graspsim.trials import campaign_execution_params, observe_scene, resolve_objects
 
 
 def main(argv=None) -> int:
@@ -51,9 +52,10 @@ def main(argv=None) -> int:
     seed, objects, n_objects = configs[0]["seed"], configs[0]["objects"], \
         configs[0]["config"]["n_objects"]
     keep = None if args.objects is None else set(args.objects.split(","))
-    params = ExecutionParams()
+    params = {f.name: campaign_execution_params(f) for f in args.folders}
     if args.tip_clearance is not None:
-        params = dataclasses.replace(params, tip_clearance=args.tip_clearance)
+        params = {k: dataclasses.replace(v, tip_clearance=args.tip_clearance)
+                  for k, v in params.items()}
     gkw = {k: v for k, v in (("margin", args.margin), ("depth_offset", args.depth_offset))
            if v is not None}
 
@@ -71,8 +73,9 @@ def main(argv=None) -> int:
             if rect is None:
                 outcomes[name][i] = recs[i]["reason"]
                 continue
-            g = harness_grasps([GraspRectangle(*rect)], frame, scene.table_z, params, **gkw)[0]
-            outcomes[name][i] = run_grasp(sim, scene, g, params).reason
+            g = harness_grasps([GraspRectangle(*rect)], frame, scene.table_z, params[name],
+                               **gkw)[0]
+            outcomes[name][i] = run_grasp(sim, scene, g, params[name]).reason
 
     summary = {}
     for name, out in outcomes.items():
@@ -85,7 +88,7 @@ def main(argv=None) -> int:
             "lost": sorted(i for i, r in out.items() if r is not None and rec[i]["success"]),
             "reasons": dict(collections.Counter(str(r) for r in out.values())),
         }
-    result = {"seed": seed, "objects": objects, "tip_clearance": params.tip_clearance,
+    result = {"seed": seed, "objects": objects, "tip_clearance": args.tip_clearance,
               **gkw, "folders": summary}
     print(json.dumps(result, indent=1))
     if args.out is not None:

@@ -47,6 +47,13 @@ def register(subparsers) -> None:
                         "(docs/sim_settings.md; default: %(default)s)")
     p.add_argument("--objects-per-scene", type=int, default=None,
                    help="1: Cornell-like (default); >1 clutter (default 5 with --declutter)")
+    p.add_argument("--min-grip", type=float, default=None, metavar="METRES",
+                   help="fingers that would meet a surface above the table on the way down "
+                        "(a plate or bowl under the object) stop 2 mm short of it when their "
+                        "tips still reach this far beyond the surface under the rectangle's "
+                        "centre; --gripper-aware judges rectangles the same way. Off by "
+                        "default (not adopted: README, 'Clutter removal'); recorded in "
+                        "config.json")
     p.add_argument("--declutter", action="store_true",
                    help="clutter-removal rounds: a lifted object leaves the scene and the "
                         "detector grasps again; reports grasp success and declutter rates "
@@ -55,6 +62,7 @@ def register(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    from graspsim.execution import ExecutionParams
     from graspsim.trials import TrialConfig, run_trials
 
     k = args.objects_per_scene
@@ -66,15 +74,20 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--n must be >= 0, got {args.n}")
     config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler,
                          profile=args.profile)
+    try:
+        params = ExecutionParams(min_grip=args.min_grip)
+    except ValueError as exc:
+        raise ValueError(f"--min-grip: {exc}") from None
     executor = executor_from_args(args)
     detector, name = args.detector, None
     if args.gripper_aware:
         from graspsim.detectors import gripper_aware, load_detector
 
-        detector, name = gripper_aware(load_detector(args.detector)), f"{args.detector}+aware"
+        detector = gripper_aware(load_detector(args.detector), min_grip=args.min_grip)
+        name = f"{args.detector}+aware"
     kwargs = dict(detector=detector, objects=args.objects, n=args.n, seed=args.seed,
                   out=args.out, n_jobs=args.jobs, progress=True, config=config,
-                  executor=executor, detector_name=name)
+                  params=params, executor=executor, detector_name=name)
     if args.declutter:
         from graspsim.declutter import run_rounds
 

@@ -167,6 +167,13 @@ def test_cli_declutter(tmp_path, capsys):
     assert len((out / "rounds.jsonl").read_text().splitlines()) == 1
     s = json.loads((out / "summary.json").read_text())
     assert s["config"]["n_objects"] == 2 and s["rounds"] == 1
+    assert "execution parameters" not in (out / "summary.md").read_text()
+    settle = tmp_path / "settle"
+    assert main(["trials", "--detector", "mask-pca", "--declutter", "--objects-per-scene",
+                 "2", "--n", "1", "--candidates", "0", "--min-grip", "0.01",
+                 "--out", str(settle)]) == 0
+    assert json.loads((settle / "config.json").read_text())["execution"]["min_grip"] == 0.01
+    assert "min_grip = 0.01" in (settle / "summary.md").read_text()
     assert main(["trials", "--detector", "mask-pca", "--objects-per-scene", "0", "--n", "1",
                  "--out", str(tmp_path / "e")]) == 2
     assert "--objects-per-scene must be >= 1" in capsys.readouterr().err

@@ -86,3 +86,30 @@ def test_declutter_removes_grasped_objects():
         assert terminated == (remaining == 0)
     finally:
         e.close()
+
+
+def test_execution_parameters_reach_labels_and_grasps(monkeypatch):
+    import graspsim.env as genv
+    from graspsim.execution import ExecutionParams
+
+    with pytest.raises(TypeError, match="ExecutionParams"):
+        genv.GraspEnv(execution={"min_grip": 0.01})
+    params = ExecutionParams(min_grip=0.01)
+    seen = []
+    for name in ("harness_grasps", "execute_grasp", "run_grasp", "label_rectangles"):
+        real = getattr(genv, name)
+
+        def spy(*args, _real=real, _name=name, **kwargs):
+            seen.append((_name, next(a for a in args if isinstance(a, ExecutionParams))))
+            return _real(*args, **kwargs)
+
+        monkeypatch.setattr(genv, name, spy)
+    env = genv.GraspEnv(objects="test", n_candidates=4, execution=params)
+    try:
+        env.reset(seed=3, options={"label": True})
+        env.step(np.array([320.0, 240.0, 0.4, 60.0, 20.0], dtype=np.float32))
+    finally:
+        env.close()
+    names = {n for n, _ in seen}
+    assert {"label_rectangles", "harness_grasps"} <= names and len(names) >= 3
+    assert all(p is params for _, p in seen)

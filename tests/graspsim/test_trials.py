@@ -11,7 +11,8 @@ from dlsr.datasets import load_cornell
 from dlsr.patches import load_patch_file
 from graspsim.datagen import make_dataset, make_patches
 from graspsim.detectors import load_detector
-from graspsim.trials import TrialConfig, run_trials, wilson_interval
+from graspsim.execution import ExecutionParams
+from graspsim.trials import TrialConfig, campaign_execution_params, run_trials, wilson_interval
 
 pytestmark = pytest.mark.sim
 
@@ -54,6 +55,35 @@ def test_resume_after_a_kill_repeats_and_loses_nothing(tmp_path, easy_objects):
     # Another configuration in the same folder is refused.
     with pytest.raises(ValueError, match="another configuration"):
         run_trials("random", easy_objects, n=4, seed=3, out=out, config=cfg)
+
+
+def test_execution_parameters_belong_to_the_campaign(tmp_path, easy_objects):
+    cfg, out = TrialConfig(n_candidates=0), tmp_path / "settle"
+    params = ExecutionParams(min_grip=0.01)
+    run_trials("mask-pca", easy_objects, n=2, seed=3, out=out, config=cfg, params=params)
+    assert json.loads((out / "config.json").read_text())["execution"]["min_grip"] == 0.01
+    assert campaign_execution_params(out) == params
+    assert "min_grip = 0.01" in (out / "summary.md").read_text()
+    # Resuming it with the harness's defaults would mix two harnesses in one folder.
+    with pytest.raises(ValueError, match="another configuration"):
+        run_trials("mask-pca", easy_objects, n=2, seed=3, out=out, config=cfg)
+    again = run_trials("mask-pca", easy_objects, n=2, seed=3, out=out, config=cfg,
+                       params=params)
+    assert again["trials_per_second"] is None
+    # A folder written before the parameters were recorded ran the defaults.
+    plain = tmp_path / "plain"
+    run_trials("mask-pca", easy_objects, n=2, seed=3, out=plain, config=cfg)
+    assert "execution parameters" not in (plain / "summary.md").read_text()
+    meta = json.loads((plain / "config.json").read_text())
+    del meta["execution"]
+    (plain / "config.json").write_text(json.dumps(meta))
+    assert campaign_execution_params(plain) == ExecutionParams()
+    assert run_trials("mask-pca", easy_objects, n=2, seed=3, out=plain,
+                      config=cfg)["trials_per_second"] is None
+    with pytest.raises(ValueError, match="another configuration"):
+        run_trials("mask-pca", easy_objects, n=2, seed=3, out=plain, config=cfg, params=params)
+    with pytest.raises(FileNotFoundError, match="not a trial folder"):
+        campaign_execution_params(tmp_path / "nowhere")
 
 
 def test_results_do_not_depend_on_n_jobs(easy_objects):
@@ -169,6 +199,17 @@ def test_trials_cli(tmp_path, capsys):
     assert [r["object"] for r in plain] == [r["object"] for r in wrapped]
     assert all(r["rectangle"] is None or r["reason"] != "too wide for the gripper"
                for r in wrapped)
+    # --min-grip is recorded with the folder and refused below zero, in one line.
+    settle = tmp_path / "settle"
+    assert main(["trials", "--detector", "mask-pca", "--gripper-aware", "--min-grip", "0.01",
+                 "--objects", "test", "--n", "1", "--candidates", "0",
+                 "--out", str(settle)]) == 0
+    assert campaign_execution_params(settle) == ExecutionParams(min_grip=0.01)
+    capsys.readouterr()
+    assert main(["trials", "--detector", "mask-pca", "--min-grip", "-0.01", "--n", "1",
+                 "--out", str(tmp_path / "z")]) == 2
+    err = capsys.readouterr().err
+    assert "--min-grip" in err and err.count("\n") == 1
     # The executor flags of every long command.
     assert main(["trials", "--detector", "mask-pca", "--n", "1", "--address", "127.0.0.1:1",
                  "--out", str(tmp_path / "y")]) == 2
