@@ -41,6 +41,13 @@ pair when their folds hold the same objects and each fold's DLSR trial folders p
 Their DLSR trials are pooled over the folds, keyed by (fold, trial index): this compares two
 configurations on train objects their models never saw.
 
+Trial folders whose records mark scenes as graspable (``graspable``, the manifest's flag) and
+hold both kinds are also compared on the graspable scenes alone (``graspable``), the figure that
+issue-style targets "on graspable objects" ask for. Two trial folders run with different
+execution parameters (``config.json``'s ``execution``) still pair -- that is how a harness
+setting is compared on fixed scenes -- but the comparison names the parameters that differ
+(``execution``) and says that its difference mixes detector and harness.
+
 Folders of different lengths (a 100-trial and a 200-trial run of the same seed, or a run still
 going) are paired on the trials or images present in both: trial ``i`` is the same scene in
 both, so the shared part is a valid paired sample. How many were left out of each folder is
@@ -434,7 +441,36 @@ def _pair(a: dict, b: dict, names, alpha: float) -> dict:
         side[tag] = {"folder": str(f["folder"]), "name": name, "successes": k,
                      "success_rate": k / res["n"],
                      "success_ci95": list(wilson_interval(k, res["n"]))}
-    return {"kind": a["kind"], "unit": unit, **side, "unpaired": unpaired, **res}
+    extra = {}
+    if a["kind"] != "scores":
+        g = [k for k in keys if a["records"][k].get("graspable") is True]
+        if 0 < len(g) < len(keys):
+            r = compare_outcomes([bool(a["records"][k]["success"]) for k in g],
+                                 [bool(b["records"][k]["success"]) for k in g],
+                                 names=names, alpha=alpha, unit=unit)
+            extra["graspable"] = {k: r[k] for k in ("n", "counts", "success_a", "success_b",
+                                                    "difference", "difference_ci",
+                                                    "mcnemar_p", "better")}
+    if a["kind"] == "trials":
+        ea, eb = _execution_changes(a), _execution_changes(b)
+        if ea != eb:
+            extra["execution"] = {"a": ea, "b": eb}
+            log.warning("%s vs %s: run with different execution parameters (%s; %s): the "
+                        "difference mixes detector and harness", names[0], names[1],
+                        _changes_text(ea), _changes_text(eb))
+    return {"kind": a["kind"], "unit": unit, **side, "unpaired": unpaired, **res, **extra}
+
+
+def _execution_changes(f: dict) -> dict:
+    """The execution parameters a trial folder ran with that differ from the defaults."""
+    from .execution import execution_changes, execution_params_from_dict
+
+    return execution_changes(execution_params_from_dict(
+        f["config"].get("execution", {}), str(Path(f["folder"]) / "config.json")))
+
+
+def _changes_text(changes: dict) -> str:
+    return ", ".join(f"{k} = {v}" for k, v in changes.items()) or "the defaults"
 
 
 def compare_pair(folder_a, folder_b, names=None, alpha: float = 0.05) -> dict:
@@ -505,4 +541,21 @@ def comparison_text(c: dict) -> str:
         f"[{100 * lo:+.1f}, {100 * hi:+.1f}] (Newcombe 1998, method 10)",
         f"  exact McNemar p = {c['mcnemar_p']:.3g}",
         f"  {c['verdict']}",
+        *_graspable_lines(c, na, nb, level),
+        *([f"  execution parameters differ ({na}: {_changes_text(c['execution']['a'])}; "
+           f"{nb}: {_changes_text(c['execution']['b'])}): the difference mixes detector and "
+           "harness"] if c.get("execution") else []),
     ])
+
+
+def _graspable_lines(c: dict, na: str, nb: str, level: str) -> list[str]:
+    g = c.get("graspable")
+    if not g:
+        return []
+    n, (lo, hi) = g["n"], g["difference_ci"]
+    return [f"  on graspable objects ({n} paired {c['unit']}): {na} {g['success_a']}/{n} = "
+            f"{100 * g['success_a'] / n:.1f} %, {nb} {g['success_b']}/{n} = "
+            f"{100 * g['success_b'] / n:.1f} %; difference {100 * g['difference']:+.1f} "
+            f"points, {level} interval [{100 * lo:+.1f}, {100 * hi:+.1f}], exact McNemar "
+            f"p = {g['mcnemar_p']:.3g} ({g['counts']['only_a']} against "
+            f"{g['counts']['only_b']} won alone)"]

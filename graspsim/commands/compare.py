@@ -16,7 +16,9 @@ def register(subparsers) -> None:
                     "folders the dataset fingerprint; object-wise validation folders "
                     "(objectwise.json) the same object folds, and their DLSR trials are pooled "
                     "over the folds. Scenes present in only one folder are left out (and "
-                    "counted).",
+                    "counted). Trials on graspable objects are also compared on their own, "
+                    "and trial folders run with different execution parameters are named as "
+                    "such.",
     )
     p.add_argument("folders", nargs="+", metavar="DIR",
                    help="graspsim trials (or graspsim score, or object-wise validation) output "

@@ -130,19 +130,22 @@ OBJECTS = ["mug", "bowl", "box", "can"]
 
 
 def _trials(path, detector, success, seed=0, objects="test", n_objects=1, names=None,
-            indices=None):
+            indices=None, graspable=None, execution=None):
     path.mkdir(parents=True)
-    (path / "config.json").write_text(json.dumps({
-        "detector": detector, "objects": objects, "seed": seed,
-        "config": {"n_candidates": 8, "n_objects": n_objects, "label_with_clean_depth": False},
-    }))
+    cfg = {"detector": detector, "objects": objects, "seed": seed,
+           "config": {"n_candidates": 8, "n_objects": n_objects, "label_with_clean_depth": False}}
+    if execution is not None:
+        cfg["execution"] = execution
+    (path / "config.json").write_text(json.dumps(cfg))
     indices = range(len(success)) if indices is None else indices
     with open(path / "trials.jsonl", "w") as fh:
         for i, s in zip(indices, success, strict=True):
             obj = (names or {}).get(i, OBJECTS[i % len(OBJECTS)])
-            fh.write(json.dumps({"index": i, "seed": seed, "object": [obj],
-                                 "success": bool(s), "reason": None if s else "slipped",
-                                 "rectangle": None}) + "\n")
+            rec = {"index": i, "seed": seed, "object": [obj], "success": bool(s),
+                   "reason": None if s else "slipped", "rectangle": None}
+            if graspable is not None:
+                rec["graspable"] = bool(graspable[i])
+            fh.write(json.dumps(rec) + "\n")
     return path
 
 
@@ -170,6 +173,40 @@ def test_trial_folders_pair_by_index(tmp_path):
     assert c["difference"] == pytest.approx(1 / 6)
     assert lo < c["difference"] < hi
     json.dumps(c)  # plain JSON
+
+
+def test_graspable_scenes_are_compared_on_their_own(tmp_path, capsys):
+    flags = [1, 1, 1, 1, 0, 0, 1, 0]
+    a = _trials(tmp_path / "a", "dlsr", [1, 1, 1, 0, 0, 0, 1, 0], graspable=flags)
+    b = _trials(tmp_path / "b", "mask-pca", [1, 0, 0, 0, 0, 1, 0, 0], graspable=flags)
+    c = compare_pair(a, b)
+    g = c["graspable"]
+    assert g["n"] == 5 and (g["success_a"], g["success_b"]) == (4, 1)
+    assert g["counts"] == {"both": 1, "only_a": 3, "only_b": 0, "neither": 1}
+    assert g["difference"] == pytest.approx(3 / 5) and c["difference"] == pytest.approx(2 / 8)
+    assert g["mcnemar_p"] == pytest.approx(_binomial_mcnemar(3, 0))
+    assert main(["compare", str(a), str(b)]) == 0
+    assert "on graspable objects (5 paired trials): dlsr 4/5 = 80.0 %" in capsys.readouterr().out
+    # Nothing to add when every scene, or none, is marked graspable.
+    for name, marks in (("all", [1] * 8), ("none", None)):
+        x = _trials(tmp_path / f"{name}a", "dlsr", [1] * 8, graspable=marks)
+        y = _trials(tmp_path / f"{name}b", "mask-pca", [0] * 8, graspable=marks)
+        assert "graspable" not in compare_pair(x, y)
+
+
+def test_different_execution_parameters_pair_and_are_named(tmp_path, capsys, caplog):
+    a = _trials(tmp_path / "settle", "dlsr", [1, 1, 0, 1], execution={"min_grip": 0.01})
+    b = _trials(tmp_path / "plain", "dlsr", [1, 0, 0, 1])
+    c = compare_pair(a, b)
+    assert c["n"] == 4 and c["execution"] == {"a": {"min_grip": 0.01}, "b": {}}
+    assert "mixes detector and harness" in caplog.text
+    assert main(["compare", str(a), str(b)]) == 0
+    assert "execution parameters differ" in capsys.readouterr().out
+    same = _trials(tmp_path / "same", "mask-pca", [0, 0, 0, 0], execution={"min_grip": None})
+    assert "execution" not in compare_pair(b, same)
+    bad = _trials(tmp_path / "bad", "dlsr", [1, 1, 1, 1], execution={"min_grip": -1})
+    with pytest.raises(ValueError, match="bad/config.json"):
+        compare_pair(a, bad)
 
 
 def test_incomplete_folders_pair_on_shared_trials(tmp_path):
