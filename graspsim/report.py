@@ -418,18 +418,26 @@ def _paired_section(root: Path, names: list[str], stages: dict, pics: Path) -> l
                         "p is the exact McNemar test (two-sided binomial test of the trials "
                         "only one detector won). The verdict is the test's at the 5 % level."))
     rows = []
+    graspable = any("graspable" in c for c in comparisons)
     for c in comparisons:
         k = c["counts"]
         lo, hi = c["difference_ci"]
         verdict = {"a": "DLSR better", "b": f"{c['b']['name']} better"}.get(
             c["better"], "not separated")
-        rows.append([c["b"]["name"], c["n"], k["both"], k["only_a"], k["only_b"], k["neither"],
-                     f"{100 * c['difference']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]",
-                     f"{c['mcnemar_p']:.2g}", verdict])
+        row = [c["b"]["name"], c["n"], k["both"], k["only_a"], k["only_b"], k["neither"],
+               f"{100 * c['difference']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"]
+        if graspable:
+            g = c.get("graspable")
+            row.append("" if g is None else
+                       f"{g['n']}: {100 * g['difference']:+.1f} [{100 * g['difference_ci'][0]:+.1f}"
+                       f", {100 * g['difference_ci'][1]:+.1f}], p = {g['mcnemar_p']:.2g}")
+        rows.append([*row, f"{c['mcnemar_p']:.2g}", verdict])
     if rows:
-        blocks.append(("table", ["baseline", "paired trials", "both succeeded", "only DLSR",
-                                 "only baseline", "neither", "DLSR - baseline, points [95 % CI]",
-                                 "exact McNemar p", "verdict (5 %)"], rows))
+        head = ["baseline", "paired trials", "both succeeded", "only DLSR", "only baseline",
+                "neither", "DLSR - baseline, points [95 % CI]"]
+        if graspable:
+            head.append("on graspable objects: trials, points [95 % CI], p")
+        blocks.append(("table", [*head, "exact McNemar p", "verdict (5 %)"], rows))
     blocks += [("p", c["verdict"]) for c in comparisons]
     blocks += [("p", e) for e in errors]
     if comparisons:

@@ -313,6 +313,8 @@ def test_report_compares_dlsr_with_each_baseline_and_draws(tmp_path):
     row = next(ln for ln in md.splitlines() if ln.startswith("| mask-pca | 40 |"))
     assert row.startswith("| mask-pca | 40 | 10 | 20 | 0 | 10 | +50.0 [")
     assert row.endswith("| DLSR better |")
+    # On the 30 trials of graspable objects (the plate is not): both 10, only DLSR 10.
+    assert "| 30: +33.3 [" in row
     assert "dlsr is better than mask-pca at the 5 % level" in md
     assert "| random | 40 | 0 | 30 | 0 | 10 |" in md
     pictures = ["success_rates.png", "success_per_object.png", "verdict_vs_outcome.png",
