@@ -42,11 +42,11 @@ Their DLSR trials are pooled over the folds, keyed by (fold, trial index): this 
 configurations on train objects their models never saw.
 
 Trial folders whose records mark scenes as graspable (``graspable``, the manifest's flag) and
-hold both kinds are also compared on the graspable scenes alone (``graspable``), the figure that
-issue-style targets "on graspable objects" ask for. Two trial folders run with different
-execution parameters (``config.json``'s ``execution``) still pair -- that is how a harness
-setting is compared on fixed scenes -- but the comparison names the parameters that differ
-(``execution``) and says that its difference mixes detector and harness.
+hold both kinds are also compared on the graspable scenes alone (``graspable``): the success
+"on graspable objects" that the trial summaries and the README report. Two trial folders run
+with different execution parameters (``config.json``'s ``execution``) still pair -- that is
+how a harness setting is compared on fixed scenes -- but the comparison names the parameters
+that differ (``execution``) and says that its difference mixes detector and harness.
 
 Folders of different lengths (a 100-trial and a 200-trial run of the same seed, or a run still
 going) are paired on the trials or images present in both: trial ``i`` is the same scene in
