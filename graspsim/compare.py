@@ -452,12 +452,14 @@ def _pair(a: dict, b: dict, names, alpha: float) -> dict:
                                                     "difference", "difference_ci",
                                                     "mcnemar_p", "better")}
     if a["kind"] == "trials":
+        from .execution import describe_changes
+
         ea, eb = _execution_changes(a), _execution_changes(b)
         if ea != eb:
             extra["execution"] = {"a": ea, "b": eb}
             log.warning("%s vs %s: run with different execution parameters (%s; %s): the "
                         "difference mixes detector and harness", names[0], names[1],
-                        _changes_text(ea), _changes_text(eb))
+                        describe_changes(ea), describe_changes(eb))
     return {"kind": a["kind"], "unit": unit, **side, "unpaired": unpaired, **res, **extra}
 
 
@@ -468,9 +470,6 @@ def _execution_changes(f: dict) -> dict:
     return execution_changes(execution_params_from_dict(
         f["config"].get("execution", {}), str(Path(f["folder"]) / "config.json")))
 
-
-def _changes_text(changes: dict) -> str:
-    return ", ".join(f"{k} = {v}" for k, v in changes.items()) or "the defaults"
 
 
 def compare_pair(folder_a, folder_b, names=None, alpha: float = 0.05) -> dict:
@@ -521,6 +520,8 @@ def compare_folders(folders, alpha: float = 0.05) -> list[dict]:
 
 def comparison_text(c: dict) -> str:
     """A comparison (from :func:`compare_pair`) as a few lines of plain text."""
+    from .execution import describe_changes
+
     na, nb = c["a"]["name"], c["b"]["name"]
     n = c["n"]
     k = c["counts"]
@@ -542,8 +543,8 @@ def comparison_text(c: dict) -> str:
         f"  exact McNemar p = {c['mcnemar_p']:.3g}",
         f"  {c['verdict']}",
         *_graspable_lines(c, na, nb, level),
-        *([f"  execution parameters differ ({na}: {_changes_text(c['execution']['a'])}; "
-           f"{nb}: {_changes_text(c['execution']['b'])}): the difference mixes detector and "
+        *([f"  execution parameters differ ({na}: {describe_changes(c['execution']['a'])}; "
+           f"{nb}: {describe_changes(c['execution']['b'])}): the difference mixes detector and "
            "harness"] if c.get("execution") else []),
     ])
 

@@ -59,6 +59,7 @@ from .scene import Scene, SceneBodies, build_scene
 __all__ = [
     "ExecutionParams",
     "GraspResult",
+    "describe_changes",
     "execution_changes",
     "execution_params_from_dict",
     "execute_grasp",
@@ -152,11 +153,16 @@ def execution_changes(params: ExecutionParams | None) -> dict:
     for f in fields(ExecutionParams):
         a, b = getattr(params, f.name), getattr(default, f.name)
         if f.name == "gripper":
-            out.update({f"gripper.{k}": v for k, v in asdict(a).items()
-                        if v != asdict(b)[k]})
+            ga, gb = asdict(a), asdict(b)
+            out.update({f"gripper.{k}": v for k, v in ga.items() if v != gb[k]})
         elif a != b:
             out[f.name] = a
     return out
+
+
+def describe_changes(changes: dict) -> str:
+    """:func:`execution_changes` as text: ``"min_grip = 0.01, ..."``, or ``"the defaults"``."""
+    return ", ".join(f"{k} = {v}" for k, v in changes.items()) or "the defaults"
 
 
 @dataclass

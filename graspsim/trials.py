@@ -55,6 +55,7 @@ from dlsr.records import (
 from .detectors import check_detections, load_detector, one_line
 from .execution import (
     ExecutionParams,
+    describe_changes,
     execute_grasp,
     execution_changes,
     execution_params_from_dict,
@@ -551,8 +552,7 @@ def _execution_line(s: dict) -> str | None:
     changes = execution_changes(execution_params_from_dict(s["execution"], "summary"))
     if not changes:
         return None
-    return ("- execution parameters other than the defaults: "
-            + ", ".join(f"{k} = {v}" for k, v in changes.items()))
+    return f"- execution parameters other than the defaults: {describe_changes(changes)}"
 
 
 def _resolve(detector, detector_name):
