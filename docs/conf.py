@@ -36,6 +36,8 @@ source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
 templates_path = []
+# Keep "--option" as typed in help texts and docstrings (no en dashes, no curly quotes).
+smartquotes = False
 
 # MyST: GitHub-flavoured tables and headings with anchors, so links like guide.md#section work.
 myst_enable_extensions = ["colon_fence", "deflist", "dollarmath"]

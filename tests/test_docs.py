@@ -32,8 +32,9 @@ def site(tmp_path_factory) -> Path:
     return out / "html"
 
 
-def _text(page: Path) -> str:
-    return html.unescape(re.sub(r"<[^>]+>", " ", page.read_text(encoding="utf-8")))
+def _text(source: str) -> str:
+    """The words of an HTML page, tags dropped and white space collapsed."""
+    return re.sub(r"\s+", " ", html.unescape(re.sub(r"<[^>]+>", " ", source)))
 
 
 @pytest.mark.parametrize("module, name, parameters", [
@@ -67,15 +68,17 @@ def test_every_module_has_an_api_page(site):
 def test_the_command_line_page_shows_every_subcommand(site):
     from graspsim.cli import COMMANDS, build_parser
 
-    text = _text(site / "cli.html")
+    text = _text((site / "cli.html").read_text(encoding="utf-8"))
     for name in COMMANDS:
         assert f"graspsim {name}" in text, f"graspsim {name} missing from cli.html"
     # the options too, straight from the parsers: every flag of `graspsim trials`
     trials = next(a for a in build_parser()._subparsers._group_actions[0].choices.items()
                   if a[0] == "trials")[1]
+    usage = text.replace(" ", "")  # the usage lines set "--n" as "-- n"
     for action in trials._actions:
         for flag in action.option_strings:
-            assert flag in text, f"graspsim trials {flag} missing from cli.html"
+            assert f"[{flag}" in usage or f"{flag}{action.metavar or action.dest.upper()}" \
+                in usage, f"graspsim trials {flag} missing from cli.html"
 
 
 def test_guides_and_experiments_are_listed(site):
