@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: run test lint clean constraints portability
+.PHONY: run test lint docs clean constraints portability
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	touch $@
 
 $(TEST_STAMP): pyproject.toml constraints.txt | $(BIN)/python
-	$(BIN)/python -m pip install $(CONSTRAINTS) -e ".[test,ray]"
+	$(BIN)/python -m pip install $(CONSTRAINTS) -e ".[test,ray,docs]"
 	touch $(STAMP) $@
 
 run: $(STAMP)
@@ -32,6 +32,11 @@ test: $(TEST_STAMP)
 lint: $(TEST_STAMP)
 	$(BIN)/ruff check .
 
+# The documentation site (Sphinx, docs/conf.py) into docs/_build/html; warnings are errors.
+# tests/test_docs.py runs the same build in make test, so a broken reference fails CI.
+docs: $(TEST_STAMP)
+	$(BIN)/python -m sphinx -b html -W --keep-going -q docs docs/_build/html
+
 # The whole test suite once per BLAS kernel set the CPU supports (OPENBLAS_CORETYPE=Prescott,
 # Haswell, SkylakeX where /proc/cpuinfo has avx512f) and once with numba's kernels compiled for
 # a generic CPU in a fresh cache; one line per configuration, non-zero exit if any fails.
@@ -40,14 +45,14 @@ portability: $(TEST_STAMP)
 	$(BIN)/python scripts/portability.py $(PORTABILITY_ARGS)
 
 clean:
-	rm -rf $(VENV) runs .pytest_cache
+	rm -rf $(VENV) runs .pytest_cache docs/_build
 
 # Refresh constraints.txt: the newest releases the lower bounds admit, in a scratch venv.
 constraints:
 	rm -rf .venv-constraints
 	$(PYTHON) -m venv .venv-constraints
 	.venv-constraints/bin/python -m pip install --upgrade pip
-	.venv-constraints/bin/python -m pip install -e ".[test,ray]"
+	.venv-constraints/bin/python -m pip install -e ".[test,ray,docs]"
 	{ sed -n '/^#/p' constraints.txt; \
 	  .venv-constraints/bin/python -m pip freeze --exclude-editable; } > constraints.txt.new
 	mv constraints.txt.new constraints.txt

@@ -94,6 +94,20 @@ class GraspDetector(Protocol):
     """
 
     def predict(self, obs: Mapping[str, Any]) -> Any:
+        """Rectangles for one observation, best first.
+
+        Parameters
+        ----------
+        obs : dict
+            The observation: ``rgb``, ``depth``, ``depth_valid``, ``K``, ``T_world_cam``,
+            ``seed`` and, for oracles, ``positives`` (described above).
+
+        Returns
+        -------
+        list of GraspRectangle, or ndarray of shape (n, 5), or tuple
+            The rectangles best first, or ``(rectangles, scores)`` with scores of shape (n,)
+            (described above).
+        """
         ...
 
 

@@ -30,6 +30,8 @@ from pathlib import Path
 
 from dlsr.records import file_errors, read_json, write_json_atomic
 
+from .runplan import departs_from_paper, trial_names  # noqa: F401 (public here too)
+
 log = logging.getLogger(__name__)
 
 __all__ = ["RunConfig", "load_config", "run_folder", "run_job", "resume_job",
@@ -513,18 +515,6 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
         s.pop("records", None)
         s["seconds"] = time.perf_counter() - t0
         stages.finish(key, s)
-
-
-def departs_from_paper(config: RunConfig) -> bool:
-    """Whether DLSR's trial configuration is not the paper's (then ``dlsr-paper`` runs)."""
-    return config.gripper_aware or config.physical or config.detector == "lattice"
-
-
-def trial_names(config: RunConfig) -> list[str]:
-    """The detectors of the trial stage, DLSR first: ``dlsr``, ``dlsr-paper`` (the paper's
-    configuration, when :func:`departs_from_paper`), then the baselines."""
-    return ["dlsr", *(["dlsr-paper"] if departs_from_paper(config) else []),
-            *config.baselines]
 
 
 def _paper_model_path(model_path: Path, config: RunConfig) -> Path:

@@ -13,6 +13,8 @@ import logging
 from dataclasses import asdict
 from pathlib import Path
 
+from .runplan import departs_from_paper, trial_names
+
 log = logging.getLogger(__name__)
 
 __all__ = [
@@ -481,8 +483,6 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
                    + ("" if lattice else " and jaws beside the object")
                    + ", and of its best 40 the first whose fingers land on no surface seen in "
                      "the depth image nor on the object's unseen surface")
-    from .pipeline import departs_from_paper
-
     if departs_from_paper(config):
         search += ("; `dlsr-paper` is the paper's configuration on the same images (the "
                    "paper's training and grid search)")
@@ -518,8 +518,6 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
 
     blocks.append(("h2", "Physical grasp success on the "
                          + ("test objects" if config.trial_objects == "test" else "trial objects")))
-    from .pipeline import trial_names
-
     names = trial_names(config)
     rows, tables = [], []
     for name in names:

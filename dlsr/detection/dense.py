@@ -31,6 +31,7 @@ from .grid import (
     within_reach,
 )
 from .model import GRID, PATCH, PATCHES_PER_RECTANGLE, SIZE, SPLIT
+from .registry import register_detector
 
 _ONE = 1.0 - 1e-6  # as dlsr.preprocess: bilinear weights summing to one
 _GRAY = np.asarray((0.2989, 0.5870, 0.1140), dtype=np.float32)
@@ -741,3 +742,6 @@ class DenseDetector(_Base):
                                   + scorer.flops_masked * n_masked)
         stats["encode_seconds"] += time.perf_counter() - t0
         return S.reshape(Hp, Wp, nq)
+
+
+register_detector("dense", DenseDetector)

@@ -22,6 +22,7 @@ from .grid import (
     within_reach,
 )
 from .model import PATCHES_PER_RECTANGLE, DLSRDetector
+from .registry import register_detector
 
 log = logging.getLogger(__name__)
 
@@ -166,3 +167,6 @@ class ExactGridDetector(_Base):
         return Detection(cand[order], scores[order], n_candidates=len(cand),
                          n_encodings=len(cand) * PATCHES_PER_RECTANGLE, seconds=t2 - t0,
                          timings={"candidates": t1 - t0, "score": t2 - t1})
+
+
+register_detector("exact", ExactGridDetector)

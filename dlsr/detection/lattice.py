@@ -26,6 +26,7 @@ from ..rectangles import GraspRectangle
 from .exact import Detection, _check_obs, _empty, _observed_region
 from .grid import _nearest_fill, complete_region, table_surface
 from .model import PATCHES_PER_RECTANGLE
+from .registry import register_detector
 
 __all__ = ["LatticeDetector", "chord", "chords", "lattice_candidates", "lattice_step",
            "max_width_px"]
@@ -360,3 +361,6 @@ class LatticeDetector:
     def predict(self, obs) -> list[GraspRectangle]:
         """The top-k rectangles, best first (empty, with a logged reason, when none)."""
         return self.detect(obs).rectangles()
+
+
+register_detector("lattice", LatticeDetector, grid_search=False)

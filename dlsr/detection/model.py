@@ -18,11 +18,9 @@ from ..features import ENCODERS, LEARNERS, Representation, rectangle_features
 from ..records import CorruptFileError, atomic_write, load_npz, read_json, write_text_atomic
 from ..rectangles import GraspRectangle
 from .grid import SearchGrid
+from .registry import DETECTOR_KINDS, build_detector
 
 SIZE = 24
-#: What :meth:`DLSRDetector.detector` builds: the paper's grid searched densely or exactly, or
-#: candidates fitted to the object (:class:`dlsr.detection.LatticeDetector`).
-DETECTOR_KINDS = ("dense", "exact", "lattice")
 PATCH = 6
 GRID = SIZE - PATCH + 1  # 19 patch positions per side
 SPLIT = 10  # quadrant split of the 19 x 19 code map (10 | 9)
@@ -183,35 +181,22 @@ class DLSRDetector:
 
     # -- detectors ---------------------------------------------------------------------------
     def detector(self, kind: str | None = None, **options):
-        """An :class:`~dlsr.detection.ExactGridDetector` or :class:`~dlsr.detection.DenseDetector`
-        on this model.
+        """The detector of ``kind`` on this model (:func:`dlsr.detection.build_detector`).
 
-        Options default to the saved ``config`` (``grid``, ``top_k``, ``rescore``, ``region``);
-        the lattice detector ignores the grid search's (``grid``, ``coarse_to_fine``, ``rescore``).
+        Parameters
+        ----------
+        kind : {"dense", "exact", "lattice"} or None, default None
+            None takes the saved ``config["detector"]``, else ``"dense"``.
+        **options
+            Keyword options of the detector; they default to the saved ``config`` (``grid``,
+            ``top_k``, ``rescore``, ``region``); the lattice detector ignores the grid
+            search's (``grid``, ``coarse_to_fine``, ``rescore``).
+
+        Returns
+        -------
+        DenseDetector or ExactGridDetector or LatticeDetector
         """
-        from .dense import DenseDetector
-        from .exact import ExactGridDetector
-        from .lattice import LatticeDetector
-
-        kind = kind or self.config.get("detector", "dense")
-        opts = {}
-        if "grid" in self.config:
-            opts["grid"] = SearchGrid.from_dict(self.config["grid"])
-        for key in ("top_k", "region"):
-            if key in self.config:
-                opts[key] = self.config[key]
-        if kind == "dense" and "rescore" in self.config:
-            opts["rescore"] = self.config["rescore"]
-        opts.update(options)
-        if kind == "exact":
-            return ExactGridDetector(self, **opts)
-        if kind == "dense":
-            return DenseDetector(self, **opts)
-        if kind == "lattice":
-            for key in ("grid", "coarse_to_fine", "rescore"):  # the grid search's options
-                opts.pop(key, None)
-            return LatticeDetector(self, **opts)
-        raise ValueError(f"unknown detector {kind!r}; choose one of {DETECTOR_KINDS}")
+        return build_detector(self, kind, **options)
 
     def predict(self, obs) -> list[GraspRectangle]:
         """Rectangles best first (see :meth:`detector`)."""

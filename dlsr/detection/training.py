@@ -353,7 +353,7 @@ def train_detector(
     if physical:
         _check_physical_options(samples, physical_weight, physical_bins)
     if isinstance(extra_patches, (str, os.PathLike)):
-        from .patches import load_patch_file
+        from ..patches import load_patch_file
 
         extra_patches = load_patch_file(extra_patches)
     t0 = time.perf_counter()
