@@ -62,6 +62,7 @@ __all__ = [
     "nested_cv_cell",
     "nested_cv_cells",
     "run_recognition_benchmark",
+    "saved_fold",
     "table1_markdown",
     "plot_figure5",
     "figure5_markdown",
@@ -481,6 +482,8 @@ def nested_cv_cells(
     n_jobs: int = 1,
     representations: dict | None = None,
     representation_dir=None,
+    fold_dir=None,
+    on_fold=None,
 ):
     """Nested cross-validation of several learner-encoder combinations, one cell at a time out.
 
@@ -517,6 +520,16 @@ def nested_cv_cells(
         Where fitted representations are saved (``<learner>_fold<k>.npz``) and looked up
         first, so an interrupted run does not fit them again. The caller keys the folder by
         the configuration.
+    fold_dir : path or None
+        Where each finished (learner, outer fold) task's results are saved
+        (``<learner>_fold<k>.json``: every encoder's outer-fold record and the fold's
+        representation cost) and looked up first, so an interrupted run resumes at the fold
+        where it stopped: a saved fold is not computed again and gives the same record. The
+        results depend on every setting, so the caller keys the folder by the whole
+        configuration (split, folds, C grid and the representation's settings).
+    on_fold : callable or None
+        Called as ``on_fold(learner, k)`` after each (learner, outer fold) task computed here
+        (not for those read from ``fold_dir``), e.g. to advance a progress bar.
 
     Yields
     ------
@@ -554,36 +567,21 @@ def nested_cv_cells(
     encoders_of: dict = {}
     for lrn, enc in cells:
         encoders_of.setdefault(lrn, []).append(enc)
-    # one task per (learner, fold): its representation (when missing) and the features of all
-    # the learner's encoders (patches and shared computations once); the longest first
-    tasks = sorted(((lrn, k) for lrn in learners for k in range(n_folds)),
-                   key=lambda t: -_TASK_COST.get(t[0], 0))
-    results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
-        delayed(_fold_task)(
-            (lrn, k), data, folds[k][0], folds[k][1], reps.get((lrn, k)),
-            (n_atoms, whiten, n_patches, extra, int(seeds[k])), encoders_of[lrn], groups,
-            inner_folds, tuple(C_grid),
-        )
-        for lrn, k in tasks
-    )
-    rep_cost = {lrn: [0.0, 0.0] for lrn in learners}  # wall, CPU seconds fitted here
+    fdir = Path(fold_dir) if fold_dir is not None else None
+    rep_cost = {lrn: [0.0, 0.0] for lrn in learners}  # wall, CPU seconds of fitted ones
     fold_results: dict = {}
-    for (lrn, k), rep, cpu, wall, res in results:
-        fold_results[(lrn, k)] = res
-        if rep is not None:  # fitted in the task
-            reps[(lrn, k)] = rep
-            rep_cost[lrn][0] += wall
-            rep_cost[lrn][1] += cpu
-            if rep_dir is not None:
-                rep_dir.mkdir(parents=True, exist_ok=True)
-                param = rep.natural_param
-                if isinstance(param, np.generic):
-                    param = param.item()
-                meta = json.dumps({"natural_param": param})
-                with atomic_write(rep_dir / f"{lrn}_fold{k}.npz", "wb") as fh:
-                    np.savez(fh, meta=np.array(meta), **rep.to_arrays())
-        if any((lrn, f) not in fold_results for f in range(n_folds)):
-            continue
+    for lrn in learners:
+        for k in range(n_folds):
+            saved = saved_fold(fdir, lrn, k, encoders_of[lrn])
+            if saved is not None:
+                fold_results[(lrn, k)] = saved["results"]
+                rep_cost[lrn][0] += saved["representation_seconds"]
+                rep_cost[lrn][1] += saved["representation_cpu_seconds"]
+
+    def complete(lrn):
+        return all((lrn, f) in fold_results for f in range(n_folds))
+
+    def cells_of(lrn):
         rep_wall, rep_cpu = rep_cost[lrn]
         for i, enc in enumerate(encoders_of[lrn]):
             done = [fold_results[(lrn, f)][enc] for f in range(n_folds)]
@@ -599,6 +597,94 @@ def nested_cv_cells(
                 "representation_cpu_seconds": charged[1],
                 "cpu_seconds": charged[1] + float(sum(r["cpu_seconds"] for r in done)),
             }
+
+    for lrn in learners:  # learners whose every fold was saved by an interrupted run
+        if complete(lrn):
+            yield from cells_of(lrn)
+    # one task per (learner, fold): its representation (when missing) and the features of all
+    # the learner's encoders (patches and shared computations once); the longest first
+    tasks = sorted(((lrn, k) for lrn in learners for k in range(n_folds)
+                    if (lrn, k) not in fold_results),
+                   key=lambda t: -_TASK_COST.get(t[0], 0))
+    results = Parallel(n_jobs=n_jobs, return_as="generator_unordered")(
+        delayed(_fold_task)(
+            (lrn, k), data, folds[k][0], folds[k][1], reps.get((lrn, k)),
+            (n_atoms, whiten, n_patches, extra, int(seeds[k])), encoders_of[lrn], groups,
+            inner_folds, tuple(C_grid),
+        )
+        for lrn, k in tasks
+    )
+    for (lrn, k), rep, cpu, wall, res in results:
+        fold_results[(lrn, k)] = res
+        if rep is None:
+            cpu = wall = 0.0
+        else:  # fitted in the task
+            reps[(lrn, k)] = rep
+            rep_cost[lrn][0] += wall
+            rep_cost[lrn][1] += cpu
+            if rep_dir is not None:
+                rep_dir.mkdir(parents=True, exist_ok=True)
+                param = rep.natural_param
+                if isinstance(param, np.generic):
+                    param = param.item()
+                meta = json.dumps({"natural_param": param})
+                with atomic_write(rep_dir / f"{lrn}_fold{k}.npz", "wb") as fh:
+                    np.savez(fh, meta=np.array(meta), **rep.to_arrays())
+        if fdir is not None:
+            fdir.mkdir(parents=True, exist_ok=True)
+            record = {"encoders": list(res), "representation_seconds": wall,
+                      "representation_cpu_seconds": cpu, "results": res}
+            write_text_atomic(fdir / f"{lrn}_fold{k}.json",
+                              json.dumps(record, default=_json_scalar))
+        if on_fold is not None:
+            on_fold(lrn, k)
+        if complete(lrn):
+            yield from cells_of(lrn)
+
+
+def _json_scalar(value):
+    """JSON for the numpy scalars of a fold record (encoder parameters, C)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serializable")
+
+
+def saved_fold(fold_dir, learner: str, k: int, encoders) -> dict | None:
+    """The saved results of one (learner, outer fold) task, or None.
+
+    None when ``fold_dir`` is None, when no file was saved, or when the saved task did not
+    compute every one of ``encoders`` (it is then computed again). A file that cannot be read
+    raises a one-line ``ValueError`` naming it.
+
+    Parameters
+    ----------
+    fold_dir : path or None
+        The ``fold_dir`` of :func:`nested_cv_cells`.
+    learner : str
+    k : int
+        Outer fold index.
+    encoders : sequence of str
+        The encoders whose records are needed.
+
+    Returns
+    -------
+    dict or None
+        ``results`` (encoder -> outer-fold record), ``representation_seconds`` and
+        ``representation_cpu_seconds``.
+    """
+    if fold_dir is None:
+        return None
+    path = Path(fold_dir) / f"{learner}_fold{k}.json"
+    if not path.exists():
+        return None
+    with file_errors(path, "saved fold results"):
+        record = json.loads(path.read_text())
+        results = record["results"]
+        if not all(enc in results for enc in encoders):
+            return None
+        return {"results": {enc: results[enc] for enc in encoders},
+                "representation_seconds": float(record["representation_seconds"]),
+                "representation_cpu_seconds": float(record["representation_cpu_seconds"])}
 
 
 def nested_cv_cell(
@@ -631,13 +717,15 @@ def _config_key(config: dict) -> str:
 
 
 def _run_config(data, out: Path, config: dict, cells, done: dict, extra, n_jobs,
-                bar) -> tuple[dict, list]:
+                progress) -> tuple[dict, list]:
     """The cells of one configuration: the finished ones from ``done``, the missing ones computed.
 
     ``done`` maps ``(learner, encoder)`` to the records of this configuration already in
     ``results.jsonl``; it is filled in place. Each computed cell is appended to
     ``results.jsonl`` (tagged with the configuration's key) as soon as it finishes;
-    representations go to ``out/representations/<key>/``.
+    representations go to ``out/representations/<key>/`` and each finished (learner, outer
+    fold) to ``out/folds/<key>/``, so a killed run resumes at the cell and fold where it
+    stopped. ``progress`` (a :class:`_Progress`) is told of every fold and cell.
 
     Returns
     -------
@@ -649,19 +737,16 @@ def _run_config(data, out: Path, config: dict, cells, done: dict, extra, n_jobs,
     key = _config_key(config)
     results_path = out / "results.jsonl"
     todo = [c for c in cells if c not in done]
-
-    def label(cell):
-        return (f"{cell[0]}-{cell[1]} d={config['n_atoms']}"
-                + ("" if config["whiten"] else " unwhitened"))
-
     if todo:
-        bar.set_postfix_str(label(todo[0]))
+        progress.config = (f"d={config['n_atoms']}"
+                           + ("" if config["whiten"] else " unwhitened"))
         records = nested_cv_cells(
             data, todo, split=config["split"], n_folds=config["n_folds"],
             inner_folds=config["inner_folds"], C_grid=config["C_grid"],
             n_atoms=config["n_atoms"], whiten=config["whiten"], n_patches=config["n_patches"],
             extra=extra, random_state=config["random_state"], n_jobs=n_jobs,
             representation_dir=out / "representations" / key,
+            fold_dir=out / "folds" / key, on_fold=progress.fold,
         )
         for rec in records:
             rec["config_key"] = key
@@ -670,11 +755,34 @@ def _run_config(data, out: Path, config: dict, cells, done: dict, extra, n_jobs,
             with results_path.open("a") as fh:
                 fh.write(json.dumps(rec) + "\n")
             done[(rec["learner"], rec["encoder"])] = rec
-            bar.update(1)
-            pending = [c for c in todo if c not in done]
-            if pending:
-                bar.set_postfix_str(label(pending[0]))
+            progress.cell(rec["learner"], rec["encoder"])
     return {c: done[c] for c in cells}, todo
+
+
+class _Progress:
+    """The benchmark's progress bar: (learner, outer fold) tasks with tqdm's ETA, and the
+    cells finished and the last fold done as its postfix."""
+
+    def __init__(self, bar, n_cells: int, cells_done: int):
+        self.bar = bar
+        self.n_cells = n_cells
+        self.cells_done = cells_done
+        self.config = ""
+        self.last = ""
+
+    def show(self):
+        self.bar.set_postfix_str(f"cells {self.cells_done}/{self.n_cells}"
+                                 + (f", {self.last}" if self.last else ""), refresh=False)
+
+    def fold(self, learner, k):
+        self.last = f"{learner} fold {k + 1} {self.config}".rstrip()
+        self.show()
+        self.bar.update(1)
+
+    def cell(self, learner, encoder):
+        self.cells_done += 1
+        self.show()
+        self.bar.refresh()
 
 
 def run_recognition_benchmark(
@@ -699,9 +807,11 @@ def run_recognition_benchmark(
 
     Results go to ``out_dir/results.jsonl`` (one line per finished cell, tagged with the
     configuration); a rerun with the same configuration skips finished cells, and the fitted
-    representations (``out_dir/representations/<configuration key>/``) are reused, so an
-    interrupted run loses at most the cells in progress. Every (learner, outer fold) is one task
-    of one worker pool (:func:`nested_cv_cells`). At the end it writes
+    representations (``out_dir/representations/<configuration key>/``) and the finished
+    (learner, outer fold) tasks (``out_dir/folds/<configuration key>/``) are reused, so an
+    interrupted run loses at most the folds in progress. The progress bar counts those tasks
+    (with tqdm's estimate of the time left) and shows the cells finished. Every (learner,
+    outer fold) is one task of one worker pool (:func:`nested_cv_cells`). At the end it writes
     ``recognition.json`` and ``table1.md``.
     Wall and worker CPU seconds are recorded per fold, per cell and for the run (CPU time divided
     by the cores is what the run costs on an otherwise idle machine).
@@ -748,16 +858,29 @@ def run_recognition_benchmark(
     total = sum(len(c) for _, c in plan)
     finished = sum(c in done.get(k, {}) for k, (_, cs) in zip(keys, plan, strict=True)
                    for c in cs)
-    if finished:
-        log.info("resuming: %d of %d cells already done in %s", finished, total, results_path)
+    # the bar counts the (learner, outer fold) tasks of the cells still to do
+    n_tasks = saved_tasks = 0
+    for k, (cfg, cs) in zip(keys, plan, strict=True):
+        encoders_of: dict = {}
+        for lrn, enc in cs:
+            if (lrn, enc) not in done.get(k, {}):
+                encoders_of.setdefault(lrn, []).append(enc)
+        n_tasks += len(encoders_of) * cfg["n_folds"]
+        saved_tasks += sum(saved_fold(out / "folds" / k, lrn, f, encs) is not None
+                           for lrn, encs in encoders_of.items() for f in range(cfg["n_folds"]))
+    if finished or saved_tasks:
+        log.info("resuming: %d of %d cells and %d of their %d folds already done in %s",
+                 finished, total, saved_tasks, n_tasks, out)
     t0 = time.perf_counter()
     computed = []
     by_config = []
-    with tqdm(total=total, initial=finished, desc="recognition cells",
+    with tqdm(total=n_tasks, initial=saved_tasks, desc="recognition folds", unit="fold",
               disable=not progress) as bar:
+        state = _Progress(bar, total, finished)
+        state.show()
         for k, (cfg, cs) in zip(keys, plan, strict=True):
             records, todo = _run_config(data, out, cfg, cs, done.setdefault(k, {}), extra,
-                                        n_jobs, bar)
+                                        n_jobs, state)
             by_config.append(records)
             computed.extend(records[c] for c in todo)
     table = by_config[0]

@@ -213,6 +213,13 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
 
     monkeypatch.setattr(rec, "_learner_fold", counting)
     monkeypatch.setattr(rec, "_fold_representation", counting_rep)
+    # Its folds were saved: the cell is made again from them, nothing is computed.
+    assert rec.run_recognition_benchmark(separable, tmp_path, **kw)["cells"] == first["cells"]
+    assert calls == [] and fitted == []
+    # Without its saved folds, only its three outer folds are computed.
+    (tmp_path / "results.jsonl").write_text(lines[0] + "\n")
+    for path in (tmp_path / "folds").rglob(f"{dropped}_fold*.json"):
+        path.unlink()
     again = rec.run_recognition_benchmark(separable, tmp_path, **kw)
     assert calls == [(dropped, ("Natural",))] * 3  # its three outer folds, nothing else
     assert fitted == []  # the representations saved by the first run are reused
@@ -229,6 +236,74 @@ def test_benchmark_saves_each_cell_and_resumes(separable, tmp_path, monkeypatch)
                                                           "n_folds": 2})
     assert calls == [("NKM", ("Natural",))] * 2
     assert fitted == ["NKM", "NKM"]
+
+
+class _Killed(Exception):
+    pass
+
+
+def test_killed_benchmark_resumes_at_the_fold_where_it_stopped(separable, tmp_path,
+                                                                monkeypatch):
+    kw = dict(learners=["NKM", "RP"], encoders=["Natural", "ST"], split="image", n_folds=3,
+              inner_folds=2, random_state=0, progress=False, **SMALL)
+    whole = rec.run_recognition_benchmark(separable, tmp_path / "whole", **kw)
+    # Kill a run after its fourth (learner, outer fold) task: one learner's cells may be
+    # finished, the other learner has folds done and folds to go.
+    real_fold = rec._learner_fold
+    calls = []
+
+    def killing(*a, **k):
+        if len(calls) == 4:
+            raise _Killed
+        calls.append((a[3].learner, len(a[1])))
+        return real_fold(*a, **k)
+
+    monkeypatch.setattr(rec, "_learner_fold", killing)
+    with pytest.raises(_Killed):
+        rec.run_recognition_benchmark(separable, tmp_path / "killed", **kw)
+    saved = sorted(p.name for p in (tmp_path / "killed" / "folds").rglob("*.json"))
+    assert len(saved) == 4
+    # The rerun computes only the two folds not saved, and every cell is the whole run's.
+    calls.clear()
+    monkeypatch.setattr(rec, "_learner_fold", lambda *a, **k: (
+        calls.append(a[3].learner), real_fold(*a, **k))[1])
+    again = rec.run_recognition_benchmark(separable, tmp_path / "killed", **kw)
+    assert len(calls) == 6 - 4
+    key = lambda c: (c["learner"], c["encoder"])  # noqa: E731
+    assert sorted(map(key, again["cells"])) == sorted(map(key, whole["cells"]))
+    by_cell = {key(c): c for c in whole["cells"]}
+    for cell in again["cells"]:
+        ref = by_cell[key(cell)]
+        assert cell["accuracy"] == ref["accuracy"]
+        assert [f["encoder_param"] for f in cell["folds"]] == [
+            f["encoder_param"] for f in ref["folds"]]
+        assert [f["C"] for f in cell["folds"]] == [f["C"] for f in ref["folds"]]
+    # A fold saved for other encoders is computed again, not reused without them.
+    folds_dir = next((tmp_path / "killed" / "folds").iterdir())
+    assert rec.saved_fold(folds_dir, "NKM", 0, ["Natural"]) is not None
+    assert rec.saved_fold(folds_dir, "NKM", 0, ["Natural", "SC"]) is None
+    # A damaged fold file is an error naming it, not a crash deep in json.
+    (folds_dir / "NKM_fold0.json").write_text("{not json")
+    with pytest.raises(ValueError, match="NKM_fold0.json"):
+        rec.saved_fold(folds_dir, "NKM", 0, ["Natural"])
+
+
+def test_progress_counts_folds_and_cells(separable, tmp_path):
+    import io
+
+    from tqdm.auto import tqdm
+
+    text = io.StringIO()
+    bar = tqdm(total=6, file=text)
+    state = rec._Progress(bar, n_cells=4, cells_done=1)
+    state.config = "d=12"
+    state.fold("NKM", 0)
+    state.cell("NKM", "Natural")
+    assert bar.n == 1
+    assert state.cells_done == 2
+    assert state.last == "NKM fold 1 d=12"
+    bar.close()
+    assert "cells 2/4, NKM fold 1 d=12" in text.getvalue()
 
 
 def test_figure5_points_are_cells_that_resume_and_reuse_the_table(separable, tmp_path,
