@@ -89,15 +89,13 @@ def easy_objects():
     return specs
 
 
-def _pid_after(seconds):
-    time.sleep(seconds)
-    return os.getpid()
-
-
 @pytest.fixture
 def pid_after():
-    """A task for a worker: sleeps ``seconds``, then returns the worker's process id."""
-    return _pid_after
+    """A task for a worker: sleeps ``seconds``, then returns the worker's process id (from
+    ``worker_tasks``, a module a worker can import by a name no other test module has)."""
+    from worker_tasks import pid_after
+
+    return pid_after
 
 
 def _alive(pid: int) -> bool:
