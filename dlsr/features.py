@@ -195,6 +195,21 @@ def _preprocess_patches(X, M, rep_or_zca):
     return X
 
 
+class _StageClock:
+    """Adds the wall seconds since the previous lap to ``seconds[stage]`` (nothing when
+    ``seconds`` is None)."""
+
+    def __init__(self, seconds: dict | None):
+        self.seconds = seconds
+        self.t = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        if self.seconds is not None:
+            self.seconds[stage] = self.seconds.get(stage, 0.0) + now - self.t
+        self.t = now
+
+
 def fit_representation(
     images,
     masks,
@@ -207,6 +222,7 @@ def fit_representation(
     random_state=None,
     dictionary_params: dict | None = None,
     rows=None,
+    seconds: dict | None = None,
 ) -> Representation:
     """Learn whitening and a dictionary from random patches of the training rectangles.
 
@@ -230,6 +246,9 @@ def fit_representation(
     rows : array-like of int or None
         Learn from these rectangles only (positions in ``images``): the same representation as
         from ``images[rows]`` and ``masks[rows]``, without copying them. None uses all.
+    seconds : dict or None
+        When given, the wall seconds of each stage are added under ``"patches"`` (sampling),
+        ``"whitening"`` (standardisation and ZCA) and ``"dictionary"`` (learning).
 
     Returns
     -------
@@ -239,10 +258,12 @@ def fit_representation(
         raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
     rs = check_random_state(random_state)
     seeds = rs.randint(0, 2**31 - 1, size=2)
+    clock = _StageClock(seconds)
     X, M = patches.sample_patches(
         images, masks, n_patches=n_patches, min_valid=min_valid,
         random_state=int(seeds[0]), extra=extra, rows=rows,
     )
+    clock.lap("patches")
     Xs = whitening.standardize_patches(X, M)
     if whiten:
         mean, P = whitening.fit_zca(Xs, M)
@@ -250,9 +271,11 @@ def fit_representation(
     else:
         mean, P = None, None
         Xw = Xs
+    clock.lap("whitening")
     learned = dictionaries.learn_dictionary(
         Xw, learner, n_atoms=n_atoms, random_state=int(seeds[1]), **(dictionary_params or {})
     )
+    clock.lap("dictionary")
     centroids = None
     natural_param = None
     if isinstance(learned, dictionaries.LearnedDictionary):

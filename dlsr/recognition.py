@@ -292,13 +292,15 @@ def outer_folds(groups, n_splits: int, labels=None) -> list[tuple[np.ndarray, np
 
 
 def _fold_representation(data, train, learner, n_atoms, whiten, n_patches, extra, seed):
-    """The outer fold's representation and the CPU and wall seconds it took (in this worker)."""
+    """The outer fold's representation, the CPU and wall seconds it took (in this worker) and
+    the wall seconds of its stages (:func:`dlsr.features.fit_representation`)."""
     t0, c0 = time.perf_counter(), time.process_time()
+    stages: dict = {}
     rep = fit_representation(
         data.images, data.masks, learner, n_atoms=n_atoms, whiten=whiten,
-        n_patches=n_patches, extra=extra, random_state=seed, rows=train,
+        n_patches=n_patches, extra=extra, random_state=seed, rows=train, seconds=stages,
     )
-    return rep, time.process_time() - c0, time.perf_counter() - t0
+    return rep, time.process_time() - c0, time.perf_counter() - t0, stages
 
 
 #: Relative cost of one (learner, outer fold) task on the whole encoder grid (representation
@@ -310,15 +312,15 @@ _TASK_COST = {"R": 250, "RP": 190, "SC": 180, "OMP": 150, "GSVQ": 140, "NKM": 14
 def _fold_task(key, data, train, test, rep, rep_args, encoders, groups, inner_folds, C_grid):
     """One ``key = (learner, outer fold)`` task: the fold's representation when not given
     (``rep`` None), then :func:`_learner_fold`. Returns ``(key, fitted, cpu seconds, wall
-    seconds, results)``: ``fitted`` is the representation fitted here (None when it was given)
-    and the seconds are its cost."""
-    fitted, cpu, wall = None, 0.0, 0.0
+    seconds, stages, results)``: ``fitted`` is the representation fitted here (None when it
+    was given), the seconds are its cost and ``stages`` their split (empty when given)."""
+    fitted, cpu, wall, stages = None, 0.0, 0.0, {}
     with reused_heap():  # the dictionaries, features and classifiers: see dlsr._memory
         if rep is None:
-            rep, cpu, wall = _fold_representation(data, train, key[0], *rep_args)
+            rep, cpu, wall, stages = _fold_representation(data, train, key[0], *rep_args)
             fitted = rep
         results = _learner_fold(data, train, test, rep, encoders, groups, inner_folds, C_grid)
-    return key, fitted, cpu, wall, results
+    return key, fitted, cpu, wall, stages, results
 
 
 def _fit_svms(F, y, C_grid):
@@ -403,7 +405,9 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
     run once (:func:`dlsr.features.rectangle_features_multi`). Each encoder's ``seconds`` and
     ``cpu_seconds`` are its own classifier time plus its share of the features: a
     computation's CPU time is split evenly between the encoders that read it, the patches and
-    pooling evenly between all (wall time in the same proportions).
+    pooling evenly between all (wall time in the same proportions). ``seconds`` is the sum of
+    ``coding_seconds`` (that share of the features) and ``svm_seconds`` (its classifiers: the
+    inner cross-validation and the refit on the training fold).
     """
     y_tr, y_te = data.labels[train], data.labels[test]
     inner = outer_folds(groups[train], inner_folds)
@@ -443,7 +447,9 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
         t1, c1 = time.perf_counter(), time.process_time()
         res = _test(feats_tr[enc][choices[enc][1]], Fte[enc][0], y_tr, y_te, choices[enc])
         wall_share = feature_wall * share[enc] / max(feature_cpu, 1e-12)
-        res["seconds"] = own[enc][0] + time.perf_counter() - t1 + wall_share
+        res["svm_seconds"] = own[enc][0] + time.perf_counter() - t1  # inner CV and refit
+        res["coding_seconds"] = wall_share
+        res["seconds"] = res["svm_seconds"] + wall_share
         res["cpu_seconds"] = own[enc][1] + time.process_time() - c1 + share[enc]
         results[enc] = res
     return results
@@ -536,9 +542,11 @@ def nested_cv_cells(
     dict
         Per cell: ``learner``, ``encoder``, ``accuracy`` (mean over outer folds, per
         rectangle), ``std``, ``folds`` (per fold: accuracy, chosen parameters, predictions,
-        seconds), ``seconds`` (worker wall seconds of its folds, plus its learner's
-        representations for the first cell of each learner), ``representation_cpu_seconds``
-        and ``cpu_seconds`` (worker CPU seconds, on the same terms).
+        seconds, ``coding_seconds`` and ``svm_seconds``), ``seconds`` (worker wall seconds of
+        its folds, plus its learner's representations for the first cell of each learner),
+        ``representation_cpu_seconds`` and ``cpu_seconds`` (worker CPU seconds, on the same
+        terms), ``representation_stages`` (the wall seconds of those representations by stage:
+        ``patches``, ``whitening``, ``dictionary``; empty for the learner's other cells).
     """
     cells = [tuple(c) for c in cells]
     _check_names([lrn for lrn, _ in cells], [enc for _, enc in cells])
@@ -569,6 +577,7 @@ def nested_cv_cells(
         encoders_of.setdefault(lrn, []).append(enc)
     fdir = Path(fold_dir) if fold_dir is not None else None
     rep_cost = {lrn: [0.0, 0.0] for lrn in learners}  # wall, CPU seconds of fitted ones
+    rep_stages: dict = {lrn: {} for lrn in learners}  # their wall seconds by stage
     fold_results: dict = {}
     for lrn in learners:
         for k in range(n_folds):
@@ -577,6 +586,7 @@ def nested_cv_cells(
                 fold_results[(lrn, k)] = saved["results"]
                 rep_cost[lrn][0] += saved["representation_seconds"]
                 rep_cost[lrn][1] += saved["representation_cpu_seconds"]
+                _add_stages(rep_stages[lrn], saved["representation_stages"])
 
     def complete(lrn):
         return all((lrn, f) in fold_results for f in range(n_folds))
@@ -596,6 +606,7 @@ def nested_cv_cells(
                 "seconds": charged[0] + float(sum(r["seconds"] for r in done)),
                 "representation_cpu_seconds": charged[1],
                 "cpu_seconds": charged[1] + float(sum(r["cpu_seconds"] for r in done)),
+                "representation_stages": dict(rep_stages[lrn]) if i == 0 else {},
             }
 
     for lrn in learners:  # learners whose every fold was saved by an interrupted run
@@ -614,7 +625,7 @@ def nested_cv_cells(
         )
         for lrn, k in tasks
     )
-    for (lrn, k), rep, cpu, wall, res in results:
+    for (lrn, k), rep, cpu, wall, stages, res in results:
         fold_results[(lrn, k)] = res
         if rep is None:
             cpu = wall = 0.0
@@ -622,6 +633,7 @@ def nested_cv_cells(
             reps[(lrn, k)] = rep
             rep_cost[lrn][0] += wall
             rep_cost[lrn][1] += cpu
+            _add_stages(rep_stages[lrn], stages)
             if rep_dir is not None:
                 rep_dir.mkdir(parents=True, exist_ok=True)
                 param = rep.natural_param
@@ -633,13 +645,19 @@ def nested_cv_cells(
         if fdir is not None:
             fdir.mkdir(parents=True, exist_ok=True)
             record = {"encoders": list(res), "representation_seconds": wall,
-                      "representation_cpu_seconds": cpu, "results": res}
+                      "representation_cpu_seconds": cpu, "representation_stages": stages,
+                      "results": res}
             write_text_atomic(fdir / f"{lrn}_fold{k}.json",
                               json.dumps(record, default=_json_scalar))
         if on_fold is not None:
             on_fold(lrn, k)
         if complete(lrn):
             yield from cells_of(lrn)
+
+
+def _add_stages(total: dict, stages: dict) -> None:
+    for name, secs in stages.items():
+        total[name] = total.get(name, 0.0) + float(secs)
 
 
 def _json_scalar(value):
@@ -669,8 +687,9 @@ def saved_fold(fold_dir, learner: str, k: int, encoders) -> dict | None:
     Returns
     -------
     dict or None
-        ``results`` (encoder -> outer-fold record), ``representation_seconds`` and
-        ``representation_cpu_seconds``.
+        ``results`` (encoder -> outer-fold record), ``representation_seconds``,
+        ``representation_cpu_seconds`` and ``representation_stages`` (wall seconds by stage;
+        empty for files saved before they were timed).
     """
     if fold_dir is None:
         return None
@@ -684,7 +703,9 @@ def saved_fold(fold_dir, learner: str, k: int, encoders) -> dict | None:
             return None
         return {"results": {enc: results[enc] for enc in encoders},
                 "representation_seconds": float(record["representation_seconds"]),
-                "representation_cpu_seconds": float(record["representation_cpu_seconds"])}
+                "representation_cpu_seconds": float(record["representation_cpu_seconds"]),
+                # absent from files saved before the stages were timed
+                "representation_stages": dict(record.get("representation_stages", {}))}
 
 
 def nested_cv_cell(

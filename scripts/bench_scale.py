@@ -1,0 +1,203 @@
+"""Time and memory of the paper's Tables 1 and 2 at Cornell's size (one JSON object on stdout).
+
+For each size (images), on the Cornell-sized stand-in (:mod:`graspsim.standin`, made or reused
+under ``--standin``; the smaller sizes are its first images):
+
+* **table1**: ``graspsim benchmark recognition`` with all 36 learner x encoder cells,
+  ``--atoms 300``, nested 5 x 5 cross-validation, the paper's hyper-parameter grids
+  (``--paper-grid``), image-wise;
+* **table2**: ``graspsim benchmark detection`` for the rows of the paper's Table 2 that it
+  records (NKM-Natural, NKM-SC, OMP-Natural, RP-Natural), image-wise and object-wise, 5 folds.
+
+Each command runs as a child process with ``--jobs`` workers. Per size and table: ``wall_s``,
+``cpu_s`` (the whole process tree's user + system seconds, from ``getrusage``),
+``peak_rss_mb`` (the largest sum of the tree's resident memory, sampled every 0.2 s from
+``/proc``) and ``stages``: worker seconds per stage, read from the commands' own records --
+Table 1: ``patches``, ``whitening``, ``dictionary`` (the representations), ``coding`` and
+``svm_inner_cv``; Table 2: ``detection_per_image`` (mean seconds per test image) and
+``detection`` (their sum). ``growth`` gives, per table and stage, the exponent ``k`` of a
+least-squares fit of ``time = a * size^k`` over the sizes measured.
+
+Finished commands are not run again (their output folders under ``--out`` are reused, and the
+benchmarks themselves resume at the cell and fold), so a killed run continues; a run's timing
+is kept in ``OUT/timings.json`` as soon as it finishes.
+
+Usage: python scripts/bench_scale.py --sizes 100,300,885 [--jobs 2] [--standin runs/standin]
+       [--out runs/bench_scale] [--tables 1,2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from dlsr.records import write_json_atomic
+from graspsim.standin import CORNELL, make_cornell_standin, standin_subset
+
+TABLE2_ROWS = (("NKM", "Natural"), ("NKM", "SC"), ("OMP", "Natural"), ("RP", "Natural"))
+
+
+def _tree_rss_mb(root_pid: int) -> float:
+    """Resident memory of ``root_pid`` and all its descendants (MiB), from /proc."""
+    children: dict[int, list[int]] = {}
+    rss: dict[int, int] = {}
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry.name}/status") as fh:
+                fields = dict(line.split(":", 1) for line in fh if ":" in line)
+        except OSError:
+            continue
+        pid = int(entry.name)
+        children.setdefault(int(fields.get("PPid", "0").strip() or 0), []).append(pid)
+        rss[pid] = int(fields.get("VmRSS", "0 kB").split()[0])
+    total, todo = 0, [root_pid]
+    while todo:
+        pid = todo.pop()
+        total += rss.get(pid, 0)
+        todo.extend(children.get(pid, []))
+    return total / 1024
+
+
+def timed(cmd: list[str]) -> dict:
+    """Run ``cmd``; its wall and CPU seconds and the peak memory of its process tree."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd)
+    peak = [0.0]
+    stop = threading.Event()
+
+    def sample():
+        while not stop.wait(0.2):
+            peak[0] = max(peak[0], _tree_rss_mb(proc.pid))
+
+    thread = threading.Thread(target=sample, daemon=True)
+    thread.start()
+    code = proc.wait()
+    stop.set()
+    thread.join()
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if code != 0:
+        raise SystemExit(f"bench_scale: {' '.join(cmd)} failed with exit code {code}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak[0], 1)}
+
+
+def table1_stages(out: Path) -> dict:
+    rec = json.loads((out / "recognition.json").read_text())
+    stages = {"patches": 0.0, "whitening": 0.0, "dictionary": 0.0, "coding": 0.0,
+              "svm_inner_cv": 0.0}
+    for cell in rec["cells"]:
+        for name, secs in cell.get("representation_stages", {}).items():
+            stages[name] = stages.get(name, 0.0) + secs
+        for fold in cell["folds"]:
+            stages["coding"] += fold.get("coding_seconds", 0.0)
+            stages["svm_inner_cv"] += fold.get("svm_seconds", 0.0)
+    return {k: round(v, 2) for k, v in stages.items()}
+
+
+def table2_stages(outs: list[Path]) -> dict:
+    per_image, total, n = [], 0.0, 0
+    for out in outs:
+        det = json.loads((out / "detection.json").read_text())
+        k = len(det["per_image"])
+        per_image.append(det["seconds_per_image"])
+        total += det["seconds_per_image"] * k
+        n += k
+    return {"detection_per_image": round(total / max(n, 1), 3), "detection": round(total, 2)}
+
+
+def growth(rows: dict) -> dict:
+    """Per table and stage, the exponent k of time = a * size^k (least squares in log-log)."""
+    out: dict = {}
+    sizes = sorted(rows, key=int)
+    if len(sizes) < 2:
+        return out
+    for table in ("table1", "table2"):
+        have = [s for s in sizes if table in rows[s]]
+        if len(have) < 2:
+            continue
+        x = np.log([int(s) for s in have])
+        names = ["wall_s", *rows[have[0]][table]["stages"]]
+        fits = {}
+        for name in names:
+            y = [rows[s][table].get(name, rows[s][table]["stages"].get(name)) for s in have]
+            if all(v and v > 0 for v in y):
+                fits[name] = round(float(np.polyfit(x, np.log(y), 1)[0]), 2)
+        out[table] = fits
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="100,300,885")
+    ap.add_argument("--tables", default="1,2")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--standin", default="runs/standin", help="stand-in folder (made or reused)")
+    ap.add_argument("--out", default="runs/bench_scale")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    sizes = sorted({int(s) for s in args.sizes.split(",")})
+    tables = {t.strip() for t in args.tables.split(",")}
+    standin = Path(args.standin)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    biggest = max(sizes)
+    scale = biggest / CORNELL["images"]
+    made = make_cornell_standin(
+        standin, n_images=biggest, positives=round(CORNELL["positives"] * scale),
+        negatives=round(CORNELL["negatives"] * scale), seed=args.seed, n_jobs=args.jobs,
+        progress=True)
+    timings_path = out / "timings.json"
+    timings = json.loads(timings_path.read_text()) if timings_path.exists() else {}
+    graspsim = [sys.executable, "-m", "graspsim.cli"]
+    for size in sizes:
+        data = standin_subset(standin / "cornell", out / f"data_{size}", size)
+        row = timings.setdefault(str(size), {})
+        common = ["--data", str(data), "--format", "cornell", "--jobs", str(args.jobs),
+                  "--seed", str(args.seed)]
+        if "1" in tables and "table1" not in row:
+            dest = out / f"table1_{size}"
+            t = timed(graspsim + ["benchmark", "recognition", *common, "--atoms", "300",
+                                  "--folds", "5", "--inner-folds", "5", "--paper-grid",
+                                  "--split", "image", "--out", str(dest)])
+            row["table1"] = {**t, "stages": table1_stages(dest)}
+            write_json_atomic(timings_path, timings, indent=1)
+        if "2" in tables and "table2" not in row:
+            total = {"wall_s": 0.0, "cpu_s": 0.0, "peak_rss_mb": 0.0}
+            dests = []
+            for learner, encoder in TABLE2_ROWS:
+                for split in ("image", "object"):
+                    dest = out / f"table2_{size}_{learner}-{encoder}_{split}"
+                    t = timed(graspsim + ["benchmark", "detection", *common, "--learner",
+                                          learner, "--encoder", encoder, "--split", split,
+                                          "--folds", "5", "--overlays", "0",
+                                          "--out", str(dest)])
+                    total["wall_s"] += t["wall_s"]
+                    total["cpu_s"] += t["cpu_s"]
+                    total["peak_rss_mb"] = max(total["peak_rss_mb"], t["peak_rss_mb"])
+                    dests.append(dest)
+            row["table2"] = {**{k: round(v, 2) for k, v in total.items()},
+                             "stages": table2_stages(dests)}
+            write_json_atomic(timings_path, timings, indent=1)
+    result = {"machine": {"cpus": os.cpu_count(), "jobs": args.jobs,
+                          "platform": sys.platform},
+              "standin": made["reached"], "sizes": {s: timings[str(s)] for s in map(str, sizes)},
+              "growth": growth({s: timings[s] for s in map(str, sizes)})}
+    print(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,91 @@
+"""The Cornell-sized stand-in: quotas, near-miss negatives, and a tiny stand-in end to end."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from dlsr.datasets import load_cornell
+from dlsr.rectangles import GraspRectangle
+from graspsim.standin import (
+    CORNELL,
+    make_cornell_standin,
+    spread_quota,
+    standin_objects,
+    standin_subset,
+    thin_labels,
+)
+
+
+@pytest.mark.parametrize("total,available", [
+    (10, [5, 5, 5]), (10, [1, 9, 9]), (7, [0, 3, 3, 3]), (100, [2, 3]), (0, [4, 4]),
+])
+def test_spread_quota_is_even_capped_and_complete(total, available):
+    q = spread_quota(total, available, np.random.default_rng(0))
+    avail = np.asarray(available)
+    assert np.all(q <= avail) and np.all(q >= 0)
+    assert q.sum() == min(total, avail.sum())
+    # Where no cap binds, the quotas differ by at most one.
+    free = q < avail
+    if free.sum() > 1:
+        assert q[free].max() - q[free].min() <= 1
+
+
+def test_spread_quota_rejects_bad_counts():
+    with pytest.raises(ValueError, match="counts"):
+        spread_quota(3, [], np.random.default_rng(0))
+    with pytest.raises(ValueError, match="counts"):
+        spread_quota(3, [1, -1], np.random.default_rng(0))
+
+
+def test_thin_labels_keeps_the_negatives_nearest_a_positive():
+    pos = [GraspRectangle(100.0, 100.0, 0.0, 40.0, 10.0)]
+    far = GraspRectangle(300.0, 300.0, 0.0, 40.0, 10.0)
+    near_rotated = GraspRectangle(105.0, 100.0, 1.2, 40.0, 10.0)
+    near_aligned = GraspRectangle(100.0, 105.0, 0.1, 40.0, 10.0)
+    keep_pos, keep_neg = thin_labels(pos, [far, near_rotated, near_aligned], 1, 2,
+                                     np.random.default_rng(0))
+    assert keep_pos == pos
+    # Both near ones (5 px); the same distance is broken by the smaller angle difference.
+    assert keep_neg == [near_aligned, near_rotated]
+    with pytest.raises(ValueError, match="cannot keep"):
+        thin_labels(pos, [far], 2, 1, np.random.default_rng(0))
+
+
+def test_standin_objects_are_builtin_then_random_urdfs_train():
+    specs = standin_objects(CORNELL["objects"])
+    assert len(specs) == CORNELL["objects"] == len({s.name for s in specs})
+    extra = [s for s in specs if "random_urdf" in s.tags]
+    assert extra and all(s.split == "train" for s in extra)
+    with pytest.raises(ValueError, match="n_objects"):
+        standin_objects(0)
+
+
+@pytest.mark.sim
+def test_a_tiny_standin_has_the_counts_it_records(tmp_path):
+    rec = make_cornell_standin(tmp_path, n_images=3, n_objects=57, positives=5, negatives=3,
+                               seed=1, n_candidates=12)
+    samples = load_cornell(tmp_path / "cornell")
+    assert len(samples) == rec["reached"]["images"] <= 3
+    assert sum(len(s.positives) for s in samples) == rec["reached"]["positives"] <= 5
+    assert sum(len(s.negatives) for s in samples) == rec["reached"]["negatives"] <= 3
+    assert all(s.positives for s in samples)
+    assert all(s.K is not None for s in samples)  # the cameras came along
+    saved = json.loads((tmp_path / "standin.json").read_text())
+    assert saved == rec
+    assert saved["labelled_scenes"] >= saved["reached"]["images"]
+    # A rerun reuses the labelled scenes and writes the same thinned dataset.
+    again = make_cornell_standin(tmp_path, n_images=3, n_objects=57, positives=5,
+                                 negatives=3, seed=1, n_candidates=12)
+    assert again == rec
+    assert [s.positives for s in load_cornell(tmp_path / "cornell")] == \
+        [s.positives for s in samples]
+    # The smaller sizes of the scaling benchmark: its first images, as a dataset of their own.
+    sub = standin_subset(tmp_path / "cornell", tmp_path / "sub", 2)
+    first = load_cornell(sub)
+    assert [s.positives for s in first] == [s.positives for s in samples[:2]]
+    assert [s.object_id for s in first] == [s.object_id for s in samples[:2]]
+    with pytest.raises(ValueError, match="fewer than"):
+        standin_subset(tmp_path / "cornell", tmp_path / "sub", 4)
