@@ -207,7 +207,7 @@ def _finite_ci(ci) -> bool:
 
 def plot_success_rates(summaries: dict, path) -> Path:
     """Physical success rate per detector with its Wilson 95 % interval, on all objects and on
-    the objects the manifest marks graspable.
+    the objects graspable by physics (:mod:`graspsim.graspability`).
 
     Parameters
     ----------

@@ -724,7 +724,7 @@ def summary_markdown(s: dict) -> str:
         f"- trials: {s['n']} (seed {s.get('seed')})",
         f"- physical success: {s['successes']}/{s['n']} = {pct(s['success_rate'])} "
         f"(Wilson 95 % interval {pct(s['success_ci95'][0])} - {pct(s['success_ci95'][1])})",
-        f"- on objects the manifest marks graspable: {pct(s['graspable_success_rate'])} "
+        f"- on graspable objects: {pct(s['graspable_success_rate'])} "
         f"(n = {s['graspable_n']}"
         + (f", Wilson 95 % {pct(s['graspable_success_ci95'][0])} - "
            f"{pct(s['graspable_success_ci95'][1])})" if s["graspable_n"] else ")"),

@@ -7,7 +7,8 @@ The README's row for pybullet_data's ``random_urdfs`` test split (isolated objec
 
 1. The default job's models: ``graspsim run`` with its defaults except ``offline = false``
    (the offline benchmarks do not change the models), one trial per detector on the built-in
-   test objects, no baseline (``<out>/model``; resumed when it exists).
+   test objects, no baseline (``--model-run``, default ``<out>/model``; resumed when it
+   exists).
 2. ``--n`` trials per detector on ``--objects`` (seed ``--seed``), every detector on the same
    scenes, as the default job's trial stage runs them (32 dense labelling candidates per scene,
    DLSR's lattice search with the gripper-aware check, dlsr-paper the paper's grid search):
@@ -44,6 +45,8 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="runs/object-sets")
     p.add_argument("--detectors", default=",".join(DETECTORS))
+    p.add_argument("--model-run", default=None,
+                   help="run folder of the default job's models (default: <out>/model)")
     p.add_argument("--jobs", type=int, default=2, help="parallel workers")
     p.add_argument("--graspability", action="store_true",
                    help="also compute the physics graspability flags when not cached "
@@ -53,9 +56,10 @@ def main(argv=None) -> int:
     out = Path(args.out)
     names = [d.strip() for d in args.detectors.split(",") if d.strip()]
     config = RunConfig(offline=False, trials=1, baselines=[], jobs=args.jobs)
-    model_path = out / "model" / "model" / "dlsr"
+    model_run = out / "model" if args.model_run is None else Path(args.model_run)
+    model_path = model_run / "model" / "dlsr"
     if any(n.startswith("dlsr") for n in names):
-        run_job(config, out=out / "model")
+        run_job(config, out=model_run)
     oset = parse_object_set(args.objects)
     folder = out / args.objects.replace(":", "-").replace("/", "_")
     executor = Executor(backend="loky" if args.jobs != 1 else "sequential", n_jobs=args.jobs,
