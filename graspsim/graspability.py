@@ -59,7 +59,7 @@ log = logging.getLogger(__name__)
 
 #: Settled poses K an object is tried in (chosen on the train objects: see
 #: docs/experiments/2026-12-03-object-sets.md).
-DEFAULT_POSES = 8
+DEFAULT_POSES = 16
 #: Dense candidates executed per pose at most (192-256 cover 99.5 % of the successful grasps
 #: found independently, docs/guides/physics-labels.md).
 BUDGET = 256
@@ -254,10 +254,11 @@ def measure_graspability(objects, n_poses: int = DEFAULT_POSES,
 
 def graspability_flags(objects, n_poses: int = DEFAULT_POSES,
                        params: ExecutionParams | None = None, compute: bool = False,
-                       executor=None) -> dict | None:
+                       executor=None, partial: bool = False) -> dict | None:
     """``name -> graspable`` by physics over ``n_poses`` poses.
 
-    Returns None when some object is not cached and ``compute`` is False.
+    Returns None when some object is not cached and ``compute`` is False, unless
+    ``partial``: then the objects that are cached only.
     """
     if compute:
         out = measure_graspability(objects, n_poses, params, executor)
@@ -265,9 +266,9 @@ def graspability_flags(objects, n_poses: int = DEFAULT_POSES,
         specs = _specs(objects)
         entries = _read_entries(gripper_key(params))
         got = [entries.get(object_key(s)) for s in specs]
-        if not all(_known(e, n_poses) for e in got):
+        if not partial and not all(_known(e, n_poses) for e in got):
             return None
-        out = {s.name: e for s, e in zip(specs, got, strict=True)}
+        out = {s.name: e for s, e in zip(specs, got, strict=True) if _known(e, n_poses)}
     return {name: e["first_success"] is not None and e["first_success"] < n_poses
             for name, e in out.items()}
 

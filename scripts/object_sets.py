@@ -29,7 +29,7 @@ import logging
 import sys
 from pathlib import Path
 
-from graspsim.compare import compare_pair
+from graspsim.compare import compare_outcomes
 from graspsim.executor import Executor
 from graspsim.object_sets import parse_object_set
 from graspsim.pipeline import RunConfig, _trial_detector, run_job
@@ -51,11 +51,16 @@ def main(argv=None) -> int:
     p.add_argument("--graspability", action="store_true",
                    help="also compute the physics graspability flags when not cached "
                         "(otherwise the not-graspable check uses the cached flags only)")
+    p.add_argument("--table-only", action="store_true",
+                   help="write the table of the trials finished so far, run nothing")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     out = Path(args.out)
     names = [d.strip() for d in args.detectors.split(",") if d.strip()]
-    config = RunConfig(offline=False, trials=1, baselines=[], jobs=args.jobs)
+    if args.table_only:
+        print(table_markdown(table_only(out, args.objects, names)))
+        return 0
+    config = RunConfig(offline=False, trials=1, baselines=[])  # the model run: 2 jobs
     model_run = out / "model" if args.model_run is None else Path(args.model_run)
     model_path = model_run / "model" / "dlsr"
     if any(n.startswith("dlsr") for n in names):
@@ -77,46 +82,67 @@ def main(argv=None) -> int:
 
 
 def trial_table(folder: Path, names, oset, compute: bool) -> dict:
-    """Success, intervals, paired verdicts against mask-pca and the not-graspable check."""
+    """Success, intervals, paired verdicts against mask-pca and the not-graspable check, on
+    the trial indices every detector has finished (all of them once the runs are complete)."""
     from graspsim.graspability import graspability_flags
 
-    flags = graspability_flags(oset, compute=compute)
+    flags = graspability_flags(oset, compute=compute, partial=not compute)
+    recs = {}
+    for name in names:
+        path = folder / name / "trials.jsonl"
+        recs[name] = {r["index"]: r for r in map(json.loads, path.open()) if r}
+    common = sorted(set.intersection(*(set(r) for r in recs.values())))
     rows = []
     for name in names:
-        recs = [json.loads(line) for line in (folder / name / "trials.jsonl").open()]
-        k, n = sum(bool(r["success"]) for r in recs), len(recs)
+        out = [bool(recs[name][i]["success"]) for i in common]
+        k, n = sum(out), len(out)
         row = {"detector": name, "successes": k, "n": n, "rate": k / n if n else None,
                "ci95": list(wilson_interval(k, n))}
-        if name != "mask-pca" and (folder / "mask-pca").is_dir():
-            c = compare_pair(folder / name, folder / "mask-pca", names=(name, "mask-pca"))
-            row["vs_mask_pca"] = {k_: c.get(k_) for k_ in ("n", "counts", "difference",
-                                                            "difference_ci", "mcnemar_p",
-                                                            "better")}
-        if flags is not None:
-            bad = [r for r in recs if not all(flags.get(o, True) for o in r["object"])]
-            row["not_graspable_trials"] = len(bad)
-            row["not_graspable_successes"] = sum(bool(r["success"]) for r in bad)
+        if name != "mask-pca" and "mask-pca" in recs and n:
+            c = compare_outcomes(out, [bool(recs["mask-pca"][i]["success"]) for i in common],
+                                 names=(name, "mask-pca"))
+            row["vs_mask_pca"] = {k_: c[k_] for k_ in ("n", "counts", "difference",
+                                                       "difference_ci", "mcnemar_p", "better")}
+        objs = [recs[name][i]["object"] for i in common]
+        known = [i for i, o in zip(common, objs, strict=True)
+                 if flags is not None and all(x in flags for x in o)]
+        bad = [i for i in known if not all(flags[x] for x in recs[name][i]["object"])]
+        row["trials_with_flags"] = len(known)
+        row["not_graspable_trials"] = len(bad)
+        row["not_graspable_successes"] = sum(bool(recs[name][i]["success"]) for i in bad)
         rows.append(row)
-    return {"objects": oset.text, "fingerprint": oset.fingerprint(), "rows": rows,
-            "flags": None if flags is None else {
+    return {"objects": oset.text, "fingerprint": oset.fingerprint(), "indices": len(common),
+            "rows": rows, "flags": None if flags is None else {
                 "n_objects": len(flags), "graspable": sum(flags.values())}}
 
 
 def table_markdown(t: dict) -> str:
-    lines = [f"Object set `{t['objects']}` (fingerprint {t['fingerprint'][:12]})", "",
-             "| detector | success | 95 % interval | vs mask-pca (paired) | trials on "
-             "not-graspable objects: successes |", "|---|---|---|---|---|"]
+    lines = [f"Object set `{t['objects']}` (fingerprint {t['fingerprint'][:12]}), "
+             f"{t['indices']} paired trials", "",
+             "| detector | success | 95 % interval | vs mask-pca (paired, Newcombe 95 %, exact "
+             "McNemar) | successes on objects not graspable by physics |",
+             "|---|---|---|---|---|"]
     for r in t["rows"]:
         lo, hi = r["ci95"]
         v = r.get("vs_mask_pca")
         verdict = "" if v is None else (
             f"{100 * v['difference']:+.1f} [{100 * v['difference_ci'][0]:+.1f}, "
             f"{100 * v['difference_ci'][1]:+.1f}], p = {v['mcnemar_p']:.2g}")
-        ng = ("" if "not_graspable_trials" not in r
-              else f"{r['not_graspable_successes']}/{r['not_graspable_trials']}")
+        ng = (f"{r['not_graspable_successes']}/{r['not_graspable_trials']} "
+              f"({r['trials_with_flags']} trials with a flag)")
         lines.append(f"| {r['detector']} | {r['successes']}/{r['n']} = {100 * r['rate']:.1f} % "
                      f"| [{100 * lo:.1f}, {100 * hi:.1f}] | {verdict} | {ng} |")
     return "\n".join(lines) + "\n"
+
+
+def table_only(out: Path, objects: str, names) -> dict:
+    """The table of finished trials (no new trial)."""
+    oset = parse_object_set(objects)
+    folder = out / objects.replace(":", "-").replace("/", "_")
+    table = trial_table(folder, names, oset, False)
+    (folder / "table.json").write_text(json.dumps(table, indent=1) + "\n")
+    (folder / "table.md").write_text(table_markdown(table))
+    return table
 
 
 if __name__ == "__main__":
