@@ -95,7 +95,10 @@ class ObjectSpec:
     material : {"matte", "dark", "specular", "transparent"}
         Drives the depth-dropout model of the camera.
     graspable : bool
-        False for objects wider than the gripper's opening in every direction. Built-in set:
+        :func:`graspsim.trials.resolve_objects` sets it by physics where a graspability
+        manifest has the object (:mod:`graspsim.graspability`: a successful grasp in one of K
+        settled poses). The loaders here set a box rule: False for objects wider than the
+        gripper's opening in every direction. Built-in set:
         ``min_width < GRIPPER_OPENING`` (some part, e.g. a handle, rim wall or neck, is narrower
         than the jaws); random_urdfs: second-smallest extent < opening; user folders: smaller
         horizontal extent (x or y of the mesh) < opening.

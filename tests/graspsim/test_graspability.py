@@ -65,7 +65,8 @@ def test_flags_come_from_the_cache_only_when_it_decides_them(user_cache):
 
 @pytest.mark.sim
 def test_measure_caches_and_does_not_measure_again(user_cache, monkeypatch):
-    spec = _spec("can_soda")
+    # Another mass: an object the committed manifest does not have.
+    spec = replace(_spec("can_soda"), mass=0.123)
     out = g.measure_graspability([spec], n_poses=1)
     assert out["can_soda"] == {"first_success": 0, "poses_tried": 1}
     data = json.loads(next(user_cache.glob("graspability-*.json")).read_text())
