@@ -26,6 +26,7 @@ COMMANDS = [
     "patches",
     "score",
     "compare",
+    "objects",
 ]
 
 

@@ -216,7 +216,9 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     ----------
     n_scenes : int
         Images (one scene each), numbered ``0000`` ... in the Cornell layout.
-    objects : {"train", "test", "all"} or list of ObjectSpec
+    objects : str, ObjectSet or list of ObjectSpec
+        An object set (:func:`graspsim.trials.resolve_objects`: a built-in split or names,
+        ``random_urdfs[:split]``, ``folder:PATH[:split]``).
     out : str or Path
         Root folder (``00/pcd0000r.png``, ``pcd0000d.tiff``, ``pcd0000cpos.txt``,
         ``pcd0000cneg.txt``, ``pcd0000camera.json``, ..., ``image_objects.txt``) plus
@@ -252,7 +254,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     from dlsr.records import read_json, write_json_atomic
 
     from .execution import ExecutionParams
-    from .trials import _executor, read_done, resolve_objects
+    from .object_sets import check_same_object_set
+    from .trials import _executor, object_set_meta, read_done, resolve_objects
 
     if n_scenes < 1:
         raise ValueError(f"n_scenes must be >= 1, got {n_scenes}")
@@ -263,15 +266,19 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     specs = resolve_objects(objects)
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
-    meta = {"format": MANIFEST_FORMAT,
-            "objects": objects if isinstance(objects, str) else [s.name for s in specs],
+    meta = {"format": MANIFEST_FORMAT, **object_set_meta(objects, specs),
             "seed": seed, "n_candidates": n_candidates, "n_objects": n_objects}
     if sampler != "mixed":  # datasets of the default sampler keep their recorded configuration
         meta["sampler"] = sampler
     if prof != get_profile(None):  # likewise datasets of the default profile
         meta["profile"] = prof.to_dict()
     meta_path = root / "dataset_config.json"
-    if meta_path.exists() and read_json(meta_path, "dataset configuration") != meta:
+    old = read_json(meta_path, "dataset configuration") if meta_path.exists() else None
+    if old is not None:
+        check_same_object_set(old.get("object_set"), meta["object_set"], root)
+        # A dataset written before the object set was recorded holds a built-in set.
+        old.setdefault("object_set", meta["object_set"])
+    if old is not None and old != json.loads(json.dumps(meta)):
         raise ValueError(f"{root} holds a dataset of another configuration ({meta_path}); "
                          "use a new folder")
     write_json_atomic(meta_path, meta)
@@ -308,7 +315,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     used = {o["name"] for r in records for o in r["objects"]}
     manifest = {
         "format": MANIFEST_FORMAT,
-        "generator": {**{k: meta[k] for k in ("seed", "objects", "n_candidates", "n_objects")},
+        "generator": {**{k: meta[k] for k in ("seed", "objects", "object_set", "n_candidates",
+                                              "n_objects")},
                       "sampler": sampler,
                       **({"profile": meta["profile"]} if "profile" in meta else {}),
                       "scene_streams": "numpy SeedSequence(seed, spawn_key=(index,)), "
@@ -369,7 +377,9 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
     out : str or Path
         ``.npz`` written by :func:`dlsr.patches.save_patch_file` (read it with
         :func:`dlsr.patches.load_patch_file`).
-    objects : {"train", "test", "all"} or list of ObjectSpec
+    objects : str, ObjectSet or list of ObjectSpec
+        An object set (:func:`graspsim.trials.resolve_objects`: a built-in split or names,
+        ``random_urdfs[:split]``, ``folder:PATH[:split]``).
     seed : int
     n_scenes : int or None
         Scenes to render; default ``max(2, ceil(n / 2000))``.

@@ -54,7 +54,9 @@ class GraspEnv(gym.Env):
     Parameters
     ----------
     render_mode : {"rgb_array"} or None
-    objects : {"train", "test", "all"} or list of ObjectSpec
+    objects : str, ObjectSet or list of ObjectSpec
+        An object set (:func:`graspsim.trials.resolve_objects`: a built-in split or names,
+        ``random_urdfs[:split]``, ``folder:PATH[:split]``).
     n_objects : int
         Objects per scene (default 1; 5 in declutter mode when not given).
     declutter : bool

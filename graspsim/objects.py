@@ -95,7 +95,10 @@ class ObjectSpec:
     material : {"matte", "dark", "specular", "transparent"}
         Drives the depth-dropout model of the camera.
     graspable : bool
-        False for objects wider than the gripper's opening in every direction. Built-in set:
+        :func:`graspsim.trials.resolve_objects` sets it by physics where a graspability
+        manifest has the object (:mod:`graspsim.graspability`: a successful grasp in one of K
+        settled poses). The loaders here set a box rule: False for objects wider than the
+        gripper's opening in every direction. Built-in set:
         ``min_width < GRIPPER_OPENING`` (some part, e.g. a handle, rim wall or neck, is narrower
         than the jaws); random_urdfs: second-smallest extent < opening; user folders: smaller
         horizontal extent (x or y of the mesh) < opening.
@@ -360,11 +363,13 @@ def _obj_to_urdf(obj: Path, cache: Path, name: str, mass: float, friction: float
         )
     collision = obj
     if decompose:
-        from .sim import pybullet
+        from .sim import pybullet, quiet_c_output
 
         collision = cache / f"{name}_vhacd.obj"
         if not collision.exists() or collision.stat().st_mtime < obj.stat().st_mtime:
-            pybullet.vhacd(str(obj), str(collision), str(cache / f"{name}_vhacd.log"))
+            # V-HACD prints its whole log from C on stdout: to the logging system instead.
+            with quiet_c_output(logger=logger):
+                pybullet.vhacd(str(obj), str(collision), str(cache / f"{name}_vhacd.log"))
     urdf = cache / f"{name}.urdf"
     urdf.write_text(_OBJ_URDF.format(
         src=obj, name=name, friction=friction, mass=mass,
@@ -377,7 +382,8 @@ def _obj_to_urdf(obj: Path, cache: Path, name: str, mass: float, friction: float
 
 def folder_objects(path: str | os.PathLike, split: str = "all", *, mass: float = 0.1,
                    friction: float = 0.8, scale: float = 1.0, material: str = "matte",
-                   decompose: bool = False, test_every: int = 4) -> list[ObjectSpec]:
+                   decompose: bool = False, test_every: int = 4,
+                   errors: str = "skip") -> list[ObjectSpec]:
     """Objects from a user folder of URDF or OBJ files (YCB and the like).
 
     The folder is searched recursively. Every ``*.urdf`` is an object. Every ``*.obj`` in a
@@ -399,6 +405,9 @@ def folder_objects(path: str | os.PathLike, split: str = "all", *, mass: float =
     decompose : bool
         Convex-decompose OBJ collision shapes with V-HACD (slow for large meshes; cached).
     test_every : int
+    errors : {"skip", "raise"}
+        What a file that cannot be read does: ``"skip"`` logs a warning naming it and goes on,
+        ``"raise"`` raises a one-line ValueError naming it.
 
     Returns
     -------
@@ -407,6 +416,8 @@ def folder_objects(path: str | os.PathLike, split: str = "all", *, mass: float =
     """
     if split not in ("train", "test", "all"):
         raise ValueError(f"split must be 'train', 'test' or 'all', got {split!r}")
+    if errors not in ("skip", "raise"):
+        raise ValueError(f"errors must be 'skip' or 'raise', got {errors!r}")
     folder = Path(path)
     if not folder.is_dir():
         raise FileNotFoundError(f"object folder not found: {folder}")
@@ -438,6 +449,8 @@ def folder_objects(path: str | os.PathLike, split: str = "all", *, mass: float =
                 urdf, size = _obj_to_urdf(src, cache, name, mass, friction, scale, decompose)
                 from_file = True
         except (ValueError, OSError) as exc:
+            if errors == "raise":
+                raise ValueError(f"object {src}: {exc}") from None
             logger.warning("skipping object %s: %s", src, exc)
             continue
         specs.append(ObjectSpec(
@@ -451,11 +464,12 @@ def folder_objects(path: str | os.PathLike, split: str = "all", *, mass: float =
 
 def _pybullet_size(urdf: Path, scale: float) -> tuple[float, float, float]:
     """Extent of a URDF's collision AABB, from a throw-away DIRECT client."""
-    from .sim import connect, pybullet
+    from .sim import connect, pybullet, quiet_c_output
 
     client = connect()
     try:
-        body = client.loadURDF(str(urdf), globalScaling=scale)
+        with quiet_c_output(logger=logger):
+            body = client.loadURDF(str(urdf), globalScaling=scale)
         lo, hi = client.getAABB(body)
         return tuple(float(x) for x in np.round(np.subtract(hi, lo), 4))
     except pybullet.error as exc:

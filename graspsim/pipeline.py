@@ -52,12 +52,18 @@ class RunConfig:
         Synthetic Cornell images generated from ``train_objects``.
     train_objects, trial_objects : str
         The objects of the dataset (and so of every model and offline benchmark) and of the
-        trials (:func:`graspsim.trials.resolve_objects`: ``"train"``, ``"test"``, ``"all"`` or
-        comma-separated names of built-in objects). Defaults: the built-in split, trials on the
-        held-out test objects. Object-wise validation trains on some train objects and runs
-        the trials on the others (:func:`graspsim.trials.object_folds`,
-        ``scripts/objectwise_validation.py``), so settings are chosen on objects the model has
-        not seen without touching the test objects.
+        trials: object sets (:func:`graspsim.object_sets.parse_object_set`: ``"train"``,
+        ``"test"``, ``"all"``, comma-separated names of built-in objects,
+        ``"random_urdfs[:train|test|all]"``, ``"folder:PATH[:train|test|all]"``). Defaults:
+        the built-in split, trials on the held-out test objects. Object-wise validation
+        trains on some train objects and runs the trials on the others
+        (:func:`graspsim.trials.object_folds`, ``scripts/objectwise_validation.py``), so
+        settings are chosen on objects the model has not seen without touching the test
+        objects.
+    object_scale, object_mass, decompose : float, float or None, bool
+        Applied to both object sets (``--object-scale``, ``--object-mass``, ``--decompose`` of
+        the commands): a scale factor, every object's mass in kg (None: their own), V-HACD
+        decomposition of a folder's OBJ meshes.
     candidates : int
         Rectangles labelled by physics per scene.
     label_sampler : {"mixed", "dense"}
@@ -130,6 +136,9 @@ class RunConfig:
     scenes: int = 60
     train_objects: str = "train"
     trial_objects: str = "test"
+    object_scale: float = 1.0
+    object_mass: float | None = None
+    decompose: bool = False
     candidates: int = 64
     label_sampler: str = "dense"
     learner: str = "NKM"
@@ -179,21 +188,28 @@ class RunConfig:
         from .labelling import check_sampler
 
         check_sampler(self.label_sampler)
-        from .trials import resolve_objects
-
         for name in ("train_objects", "trial_objects"):
             value = getattr(self, name)
             if not isinstance(value, str):
-                raise ValueError(f"{name} must be a string (train, test, all or comma-separated "
-                                 f"object names), got {value!r}")
+                raise ValueError(f"{name} must be a string (an object set: train, test, all, "
+                                 f"comma-separated object names, random_urdfs[:split] or "
+                                 f"folder:PATH[:split]), got {value!r}")
             try:
-                resolve_objects(value)
-            except ValueError as exc:
+                self.object_set(name).specs()
+            except (ValueError, FileNotFoundError) as exc:
                 raise ValueError(f"{name}: {exc}") from None
         self._check_baselines()
         if self.scenes < self.folds:
             raise ValueError(f"{self.folds} folds need at least {self.folds} scenes")
         return self
+
+    def object_set(self, name: str = "trial_objects"):
+        """The :class:`graspsim.object_sets.ObjectSet` of ``train_objects`` or
+        ``trial_objects``, with ``object_scale``, ``object_mass`` and ``decompose``."""
+        from .object_sets import parse_object_set
+
+        return parse_object_set(getattr(self, name), scale=self.object_scale,
+                                mass=self.object_mass, decompose=self.decompose)
 
     def _check_baselines(self) -> None:
         """Every baseline loads (built-in, plug-in or model), so a bad name fails before the
@@ -368,17 +384,25 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
     root.mkdir(parents=True, exist_ok=True)
     run_json = root / "run.json"
     cfg = asdict(config)
+    object_sets = {name: config.object_set(name).record()
+                   for name in ("train_objects", "trial_objects")}
     if run_json.exists():
         old = read_json(run_json, "run record")
         if not resume:
             raise ValueError(f"{root} already holds a run: use --resume {root} or a new --out")
+        from .object_sets import check_same_object_set
+
+        for name, record in object_sets.items():
+            check_same_object_set((old.get("object_sets") or {}).get(name), record,
+                                  f"{root} ({name})")
         if _recorded_config(old.get("config")) != json.loads(json.dumps(cfg)):
             raise ValueError(f"{root} holds a run of another configuration ({run_json}); "
                              "use a new --out")
         log.info("continuing the run in %s", root)
     else:
         write_json_atomic(run_json, {
-            "config": cfg, "versions": _versions(), "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "config": cfg, "object_sets": object_sets, "versions": _versions(),
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
             "machine": {"platform": platform.platform(), "cpus": _cpus()},
         })
     seeds = dict(zip(("dataset", "recognition", "detection", "model", "trials"),
@@ -393,7 +417,8 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         from .datagen import make_dataset
 
         t0 = time.perf_counter()
-        stats = make_dataset(n_scenes=config.scenes, objects=config.train_objects,
+        stats = make_dataset(n_scenes=config.scenes,
+                             objects=config.object_set("train_objects"),
                              out=root / "dataset", seed=seeds["dataset"],
                              n_candidates=config.candidates, sampler=config.label_sampler,
                              executor=ex)
@@ -509,7 +534,8 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
             continue
         t0 = time.perf_counter()
         det = _trial_detector(name, model_path, config)
-        s = run_trials(det, objects=config.trial_objects, n=config.trials, seed=seed,
+        s = run_trials(det, objects=config.object_set("trial_objects"), n=config.trials,
+                       seed=seed,
                        out=root / "trials" / name, config=trial_cfg, executor=executor,
                        progress=progress, detector_name=name)
         s.pop("records", None)

@@ -143,7 +143,7 @@ def _trial_gifs(root: Path, records: list[dict], config, pics: Path) -> list[tup
     from dlsr.rectangles import GraspRectangle
 
     from .sim import Simulation
-    from .trials import observe_scene, resolve_objects
+    from .trials import observe_scene
     from .trialviz import save_gif, trial_frames
 
     chosen = []
@@ -153,7 +153,7 @@ def _trial_gifs(root: Path, records: list[dict], config, pics: Path) -> list[tup
             chosen.append((want, r))
     if not chosen:
         return []
-    specs = resolve_objects("test")
+    specs = config.object_set("trial_objects").specs()
     sim = Simulation()
     out = []
     try:
@@ -192,9 +192,12 @@ def _objects_phrase(objects: str) -> str:
     if objects in ("train", "test", "all"):
         return {"train": "the built-in train objects", "test": "the held-out test objects",
                 "all": "all built-in objects"}[objects]
-    from .trials import resolve_objects
+    from .object_sets import parse_object_set
 
-    names = [s.name for s in resolve_objects(objects)]
+    oset = parse_object_set(objects)
+    names = [s.name for s in oset.specs()]
+    if oset.source != "builtin":
+        return f"the object set `{objects}` ({len(names)} objects)"
     return f"{len(names)} built-in object{'s' if len(names) > 1 else ''} ({', '.join(names)})"
 
 
@@ -204,7 +207,7 @@ def _finite_ci(ci) -> bool:
 
 def plot_success_rates(summaries: dict, path) -> Path:
     """Physical success rate per detector with its Wilson 95 % interval, on all objects and on
-    the objects the manifest marks graspable.
+    the objects graspable by physics (:mod:`graspsim.graspability`).
 
     Parameters
     ----------

@@ -443,7 +443,8 @@ def _score_task(root, entry, spec_records, execution, rects, top_k, n_prediction
 
 
 def score_predictions(data, predictions, out=None, format: str | None = None, top_k: int = 1,
-                      n_jobs: int = 1, executor=None, progress: bool = False) -> dict:
+                      n_jobs: int = 1, executor=None, progress: bool = False,
+                      objects=None) -> dict:
     """Execute predicted rectangles in the rebuilt scenes of a dataset and summarise.
 
     Parameters
@@ -465,6 +466,11 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
         Where images run (local cores or a Ray cluster, which must see the dataset folder at
         the same path); results do not depend on it.
     progress : bool
+    objects : str, ObjectSet or None
+        Where the dataset's objects are on this machine, when not where the manifest says
+        (a folder set moved): an object set (:func:`graspsim.trials.resolve_objects`) whose
+        files have the fingerprint the dataset recorded (``generator.object_set``) and that
+        has every object of the manifest. None: the manifest's paths.
 
     Returns
     -------
@@ -490,7 +496,9 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
     if missing:
         log.warning("%d of %d images have no predictions in %s: scored as failures (no grasp "
                     "proposed)", len(missing), len(by_id), pred_path)
+    spec_records, object_set = _relocated_specs(manifest, objects, root)
     config = {"data": str(root.resolve()), "dataset_fingerprint": fingerprint,
+              "object_set": object_set,
               "predictions": str(pred_path.resolve()),
               "predictions_sha256": _predictions_sha256(pred_path, fmt),
               "format": fmt, "top_k": top_k}
@@ -515,7 +523,6 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
         log.info("resuming: %d of %d images already scored", len(images) - len(todo),
                  len(images))
     t0 = time.perf_counter()
-    spec_records = manifest["object_specs"]
     tasks = [(str(root.resolve()), e, spec_records, manifest["execution"],
               [_rect_list(r) for r in preds.get(e["image"], [])[:top_k]], top_k,
               len(preds.get(e["image"], [])))
@@ -546,6 +553,31 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
         write_text_atomic(out / "summary.md", summary_markdown(summary))
     summary["records"] = records
     return summary
+
+
+def _relocated_specs(manifest: dict, objects, root) -> tuple[dict, dict | None]:
+    """The manifest's object records, their URDFs taken from ``objects`` when it is given
+    (checked against the dataset's recorded object set), and that recorded set."""
+    recorded = manifest.get("generator", {}).get("object_set")
+    records = manifest["object_specs"]
+    if objects is None:
+        return records, recorded
+    from .trials import object_set_meta, resolve_objects
+
+    specs = resolve_objects(objects)
+    given = object_set_meta(objects, specs)["object_set"]
+    if recorded is not None and given["fingerprint"] != recorded.get("fingerprint"):
+        raise ValueError(
+            f"objects {given['text']!r} (fingerprint {given['fingerprint'][:12]}) are not the "
+            f"objects of dataset {root} ({recorded.get('text')!r}, fingerprint "
+            f"{str(recorded.get('fingerprint'))[:12]})")
+    by_name = {s.name: s for s in specs}
+    missing = sorted(n for n in records if n not in by_name)
+    if missing:
+        raise ValueError(f"objects {given['text']!r} lack {len(missing)} object(s) of dataset "
+                         f"{root}: {', '.join(missing[:5])}")
+    return ({n: {**rec, "urdf": {"path": str(by_name[n].urdf)}} for n, rec in records.items()},
+            recorded if recorded is not None else given)
 
 
 def summary_markdown(s: dict) -> str:

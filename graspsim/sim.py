@@ -28,23 +28,32 @@ def _flush_c_streams() -> None:
 
 
 @contextlib.contextmanager
-def quiet_c_output(fds: tuple[int, ...] = (1, 2)):
-    """Send what C libraries write to file descriptors ``fds`` to ``/dev/null`` in the block.
+def quiet_c_output(fds: tuple[int, ...] = (1, 2), logger=None):
+    """Keep what C libraries write to file descriptors ``fds`` off the terminal in the block.
 
     pybullet prints ``pybullet build time: ...`` when imported and ``argv[0]=`` when a client
-    connects, from C straight to the process's stdout/stderr, which :data:`sys.stdout`
-    redirection does not catch; a command whose stdout is JSON would be spoiled. Python's own
-    streams are flushed first and C's before the descriptors are restored, so nothing written
-    before or after the block is lost or delayed. Where a descriptor cannot be duplicated
-    (closed), the block runs unchanged.
+    connects, and V-HACD its whole log, from C straight to the process's stdout/stderr, which
+    :data:`sys.stdout` redirection does not catch; a command whose stdout is JSON would be
+    spoiled. Without ``logger`` the output goes to ``/dev/null``; with a
+    :class:`logging.Logger` it is captured in a temporary file and each line logged at debug
+    level after the block. Python's own streams are flushed first and C's before the
+    descriptors are restored, so nothing written before or after the block is lost or delayed.
+    Where a descriptor cannot be duplicated (closed), the block runs unchanged.
     """
+    import tempfile
+
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
             stream.flush()
     _flush_c_streams()
     saved: list[tuple[int, int]] = []
+    capture = None
     try:
-        null = os.open(os.devnull, os.O_WRONLY)
+        if logger is None:
+            sink = os.open(os.devnull, os.O_WRONLY)
+        else:
+            capture = tempfile.TemporaryFile()
+            sink = os.dup(capture.fileno())
     except OSError:
         yield
         return
@@ -54,14 +63,20 @@ def quiet_c_output(fds: tuple[int, ...] = (1, 2)):
                 saved.append((fd, os.dup(fd)))
             except OSError:
                 continue
-            os.dup2(null, fd)
+            os.dup2(sink, fd)
         yield
     finally:
         _flush_c_streams()
         for fd, copy in saved:
             os.dup2(copy, fd)
             os.close(copy)
-        os.close(null)
+        os.close(sink)
+        if capture is not None:
+            capture.seek(0)
+            for line in capture.read().decode("utf-8", "replace").splitlines():
+                if line.strip():
+                    logger.debug("%s", line.rstrip())
+            capture.close()
 
 
 # Every pybullet import of the package goes through here (``from .sim import pybullet``).

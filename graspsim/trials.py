@@ -62,8 +62,10 @@ from .execution import (
     harness_grasps,
     run_grasp,
 )
+from .graspability import apply_graspability
 from .labelling import label_rectangles, rank_positives, sample_candidates
-from .objects import ObjectSpec, builtin_objects
+from .object_sets import ObjectSet, as_object_set, check_same_object_set
+from .objects import ObjectSpec
 from .scene import build_scene, capture, make_scene
 from .sim import Simulation
 
@@ -74,6 +76,7 @@ __all__ = [
     "summarize",
     "wilson_interval",
     "resolve_objects",
+    "object_set_meta",
     "object_folds",
     "trial_streams",
     "observation",
@@ -136,32 +139,40 @@ def resolve_objects(objects) -> list[ObjectSpec]:
 
     Parameters
     ----------
-    objects : str or list of ObjectSpec
-        ``"train"``, ``"test"``, ``"all"`` (the built-in set's split), comma-separated names
-        of built-in objects (``"bottle_water,can_soda"``; kept in the built-in set's order, so
-        the scenes of a seed depend on the names chosen, not on how they are listed), or
-        ObjectSpecs.
+    objects : str, ObjectSet or list of ObjectSpec
+        An object-set text (:func:`graspsim.object_sets.parse_object_set`: ``"train"``,
+        ``"test"``, ``"all"`` (the built-in set's split), comma-separated names of built-in
+        objects (``"bottle_water,can_soda"``; kept in the built-in set's order, so the scenes of
+        a seed depend on the names chosen, not on how they are listed),
+        ``"random_urdfs[:train|test|all]"``, ``"folder:PATH[:train|test|all]"``), an
+        :class:`~graspsim.object_sets.ObjectSet`, or ObjectSpecs.
 
     Raises
     ------
     ValueError
-        Naming an object the built-in set does not have (the message lists them), or no object.
+        Naming an object the built-in set does not have (the message lists them), a bad set
+        (see :meth:`graspsim.object_sets.ObjectSet.specs`), or no object.
     """
-    if isinstance(objects, str) and objects not in ("train", "test", "all"):
-        names = {n.strip() for n in objects.split(",") if n.strip()}
-        every = builtin_objects("all")
-        unknown = sorted(names - {s.name for s in every})
-        if unknown:
-            raise ValueError(f"no built-in object named {', '.join(unknown)}; choose train, "
-                             "test, all or names of: " + ", ".join(s.name for s in every))
-        specs = [s for s in every if s.name in names]
-    elif isinstance(objects, str):
-        specs = builtin_objects(objects)
-    else:
-        specs = list(objects)
+    oset = as_object_set(objects)
+    specs = oset.specs() if oset is not None else list(objects)
     if not specs:
         raise ValueError(f"no objects in {objects!r}")
-    return specs
+    # The graspable flag by physics where a manifest has it (graspsim.graspability).
+    return apply_graspability(specs)
+
+
+def object_set_meta(objects, specs) -> dict:
+    """What a campaign folder records of its objects: ``objects`` (the text, or the names of
+    ObjectSpecs given in Python) and ``object_set`` (:meth:`graspsim.object_sets.ObjectSet.record`;
+    for ObjectSpecs, their fingerprint with ``text`` and ``source`` None)."""
+    oset = as_object_set(objects)
+    if oset is None:
+        probe = ObjectSet(text="", source="specs")
+        record = {"text": None, "source": None, "path": None, "split": None,
+                  "n_objects": len(specs), "fingerprint": probe.fingerprint(specs),
+                  "scale": None, "mass": None, "decompose": None}
+        return {"objects": [s.name for s in specs], "object_set": record}
+    return {"objects": oset.text, "object_set": oset.record(specs)}
 
 
 def object_folds(objects="train", n_folds: int = 3, seed: int = 0) -> list[list[str]]:
@@ -473,6 +484,11 @@ def _open_campaign(out, meta: dict, filename: str):
     cfg_path = out / "config.json"
     if cfg_path.exists():
         old = read_json(cfg_path, "trials configuration")
+        if "object_set" in meta:
+            check_same_object_set(old.get("object_set"), meta["object_set"], out)
+            # Folders written before the object set was recorded hold a built-in set, named
+            # by its text (still compared below).
+            old.setdefault("object_set", meta["object_set"])
         if isinstance(old.get("config"), dict):
             # A folder written before a TrialConfig field existed ran with its default.
             old["config"] = {**asdict(TrialConfig()), **old["config"]}
@@ -517,8 +533,8 @@ def _campaign_setup(detector, detector_name, objects, n: int, seed: int, config,
     specs = resolve_objects(objects)
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
-    meta = {"detector": det_name, "objects": objects if isinstance(objects, str)
-            else [s.name for s in specs], "seed": seed, "config": asdict(config),
+    meta = {"detector": det_name, **object_set_meta(objects, specs), "seed": seed,
+            "config": asdict(config),
             "execution": asdict(ExecutionParams() if params is None else params)}
     return det, specs, meta
 
@@ -581,7 +597,9 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
         A built-in name (``random``, ``mask-pca``, ``oracle``), a plug-in
         (``package.module:NAME`` or an installed entry-point name), a model path, or an object
         with ``predict(obs)`` (:class:`graspsim.detectors.GraspDetector`).
-    objects : {"train", "test", "all"} or list of ObjectSpec
+    objects : str, ObjectSet or list of ObjectSpec
+        An object set (:func:`graspsim.trials.resolve_objects`: a built-in split or names,
+        ``random_urdfs[:split]``, ``folder:PATH[:split]``).
     n : int
         Trials (indices ``0 .. n-1``).
     seed : int
@@ -706,7 +724,7 @@ def summary_markdown(s: dict) -> str:
         f"- trials: {s['n']} (seed {s.get('seed')})",
         f"- physical success: {s['successes']}/{s['n']} = {pct(s['success_rate'])} "
         f"(Wilson 95 % interval {pct(s['success_ci95'][0])} - {pct(s['success_ci95'][1])})",
-        f"- on objects the manifest marks graspable: {pct(s['graspable_success_rate'])} "
+        f"- on graspable objects: {pct(s['graspable_success_rate'])} "
         f"(n = {s['graspable_n']}"
         + (f", Wilson 95 % {pct(s['graspable_success_ci95'][0])} - "
            f"{pct(s['graspable_success_ci95'][1])})" if s["graspable_n"] else ")"),

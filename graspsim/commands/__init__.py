@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["add_executor_args", "executor_from_args"]
+__all__ = ["add_executor_args", "executor_from_args", "add_object_args", "object_set_from_args"]
 
 
 def add_executor_args(p: argparse.ArgumentParser, jobs_default: int = 1) -> None:
@@ -36,3 +36,39 @@ def executor_from_args(args: argparse.Namespace, progress: bool = True):
     if backend == "loky" and args.jobs == 1:
         backend = "sequential"
     return Executor(backend=backend, n_jobs=args.jobs, address=args.address, progress=progress)
+
+
+def add_object_args(p: argparse.ArgumentParser, default: str | None = "test",
+                    positional: bool = False) -> None:
+    """``--objects SET`` (or a positional ``SET``), ``--object-scale``, ``--object-mass`` and
+    ``--decompose``: one object-set syntax on every command
+    (:func:`graspsim.object_sets.parse_object_set`)."""
+    names = ["objects"] if positional else ["--objects"]
+    extra = {"nargs": "?"} if positional else {}
+    p.add_argument(*names, default=default, metavar="SET", **extra,
+                   help="train, test, all (the built-in split), comma-separated names of "
+                        "built-in objects, random_urdfs[:train|test|all] (pybullet_data's; "
+                        "test: the 100 folders ending in 0) or folder:PATH[:train|test|all] "
+                        "(URDF and OBJ files)"
+                        + ("" if default is None else " (default: %(default)s)"))
+    p.add_argument("--object-scale", type=float, default=1.0, metavar="FACTOR",
+                   help="scale every object (0.001 for meshes in millimetres)")
+    p.add_argument("--object-mass", type=float, default=None, metavar="KG",
+                   help="give every object this mass (default: each object's own; 0.1 kg for "
+                        "a folder's OBJ files)")
+    p.add_argument("--decompose", action="store_true",
+                   help="convex-decompose a folder's OBJ meshes with V-HACD (cached beside "
+                        "them); default: one convex hull per OBJ group")
+
+
+def object_set_from_args(args: argparse.Namespace):
+    """The :class:`graspsim.object_sets.ObjectSet` that :func:`add_object_args` describes
+    (None when ``--objects`` was not given and has no default)."""
+    from graspsim.object_sets import parse_object_set
+
+    if args.objects is None:
+        if args.object_scale != 1.0 or args.object_mass is not None or args.decompose:
+            raise ValueError("--object-scale, --object-mass and --decompose need --objects")
+        return None
+    return parse_object_set(args.objects, scale=args.object_scale, mass=args.object_mass,
+                            decompose=args.decompose)

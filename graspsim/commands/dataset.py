@@ -6,7 +6,7 @@ import argparse
 
 from graspsim.profiles import PROFILES
 
-from . import add_executor_args, executor_from_args
+from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
 
 
 def register(subparsers) -> None:
@@ -14,9 +14,7 @@ def register(subparsers) -> None:
         "dataset", help="render scenes, label rectangles by physics, write the Cornell layout"
     )
     p.add_argument("--scenes", type=int, required=True, help="number of images")
-    p.add_argument("--objects", default="train",
-                   help="train, test, all (the built-in split) or comma-separated "
-                        "names of built-in objects")
+    add_object_args(p, default="train")
     p.add_argument("--out", required=True, help="dataset root folder")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--candidates", type=int, default=48, help="rectangles labelled per scene")
@@ -34,7 +32,8 @@ def register(subparsers) -> None:
 def _run(args: argparse.Namespace) -> int:
     from graspsim.datagen import make_dataset
 
-    s = make_dataset(n_scenes=args.scenes, objects=args.objects, out=args.out, seed=args.seed,
+    s = make_dataset(n_scenes=args.scenes, objects=object_set_from_args(args), out=args.out,
+                     seed=args.seed,
                      n_candidates=args.candidates, n_objects=args.objects_per_scene,
                      sampler=args.sampler, profile=args.profile,
                      executor=executor_from_args(args))

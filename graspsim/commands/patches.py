@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_executor_args, executor_from_args
+from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
 
 
 def register(subparsers) -> None:
@@ -13,9 +13,7 @@ def register(subparsers) -> None:
     )
     p.add_argument("--n", type=int, default=100_000, help="number of patches")
     p.add_argument("--out", required=True, help=".npz file (dlsr.patches.load_patch_file)")
-    p.add_argument("--objects", default="all",
-                   help="train, test, all (the built-in split) or comma-separated "
-                        "names of built-in objects")
+    add_object_args(p, default="all")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--scenes", type=int, default=None, help="default: n / 2000")
     add_executor_args(p)
@@ -25,7 +23,7 @@ def register(subparsers) -> None:
 def _run(args: argparse.Namespace) -> int:
     from graspsim.datagen import make_patches
 
-    s = make_patches(n=args.n, out=args.out, objects=args.objects, seed=args.seed,
+    s = make_patches(n=args.n, out=args.out, objects=object_set_from_args(args), seed=args.seed,
                      n_scenes=args.scenes, executor=executor_from_args(args))
     print(f"wrote {s['n']} patches from {s['scenes']} scenes to {s['path']}")
     return 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_executor_args, executor_from_args
+from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
 
 
 def register(subparsers) -> None:
@@ -25,6 +25,7 @@ def register(subparsers) -> None:
     p.add_argument("--top-k", type=int, default=1, metavar="K",
                    help="execute each image's first K rectangles (success at k = any of the "
                         "first k); the top-1 outcome is always recorded")
+    add_object_args(p, default=None)
     add_executor_args(p)
     p.set_defaults(func=_run)
 
@@ -33,7 +34,8 @@ def _run(args: argparse.Namespace) -> int:
     from graspsim.scoring import score_predictions
 
     s = score_predictions(args.data, args.predictions, out=args.out, format=args.format,
-                          top_k=args.top_k, executor=executor_from_args(args))
+                          top_k=args.top_k, executor=executor_from_args(args),
+                          objects=object_set_from_args(args))
     lo, hi = s["success_ci95"]
     metric = s["metric_accuracy"]
     line = (f"top-1 success {s['successes']}/{s['n']} = {100 * s['success_rate']:.1f} % "

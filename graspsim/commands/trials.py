@@ -6,7 +6,7 @@ import argparse
 
 from graspsim.profiles import PROFILES
 
-from . import add_executor_args, executor_from_args
+from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
 
 
 def register(subparsers) -> None:
@@ -28,9 +28,7 @@ def register(subparsers) -> None:
                         "searches only rectangles whose jaws come down beside the object (its "
                         "grid) or openings within reach (its lattice), and ranks its best 40 "
                         "(not in the paper)")
-    p.add_argument("--objects", default="test",
-                   help="train, test, all (the built-in split) or comma-separated "
-                        "names of built-in objects")
+    add_object_args(p, default="test")
     p.add_argument("--n", type=int, default=200,
                    help="number of trials (with --declutter: of rounds)")
     p.add_argument("--seed", type=int, default=0)
@@ -85,7 +83,7 @@ def _run(args: argparse.Namespace) -> int:
 
         detector = gripper_aware(load_detector(args.detector), min_grip=args.min_grip)
         name = f"{args.detector}+aware"
-    kwargs = dict(detector=detector, objects=args.objects, n=args.n, seed=args.seed,
+    kwargs = dict(detector=detector, objects=object_set_from_args(args), n=args.n, seed=args.seed,
                   out=args.out, n_jobs=args.jobs, progress=True, config=config,
                   params=params, executor=executor, detector_name=name)
     if args.declutter:
