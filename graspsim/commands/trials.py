@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from graspsim.profiles import PROFILES
+from graspsim.scenes import SCENES
 
 from . import add_executor_args, executor_from_args
 
@@ -46,7 +47,13 @@ def register(subparsers) -> None:
                    help="how scenes are seen: camera, table, lighting, depth noise "
                         "(docs/sim_settings.md; default: %(default)s)")
     p.add_argument("--objects-per-scene", type=int, default=None,
-                   help="1: Cornell-like (default); >1 clutter (default 5 with --declutter)")
+                   help="1: Cornell-like (default); >1 clutter (default 5 with --declutter, "
+                        "--scene packed or --scene pile)")
+    p.add_argument("--scene", default="drop", choices=list(SCENES),
+                   help="how objects are put on the table: drop (default: dropped one by one "
+                        "at random poses), isolated (drop with one object), packed (upright "
+                        "side by side, VGN/GIGA), pile (dropped into a box, then the box "
+                        "removed, VGN/GIGA); recorded in config.json")
     p.add_argument("--min-grip", type=float, default=None, metavar="METRES",
                    help="fingers that would meet a surface above the table on the way down "
                         "(a plate or bowl under the object) stop 2 mm short of it when their "
@@ -67,13 +74,13 @@ def _run(args: argparse.Namespace) -> int:
 
     k = args.objects_per_scene
     if k is None:
-        k = 5 if args.declutter else 1
+        k = 5 if args.declutter or args.scene in ("packed", "pile") else 1
     if k < 1:
         raise ValueError(f"--objects-per-scene must be >= 1, got {k}")
     if args.n < 0:
         raise ValueError(f"--n must be >= 0, got {args.n}")
     config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler,
-                         profile=args.profile)
+                         profile=args.profile, scene=args.scene)
     try:
         params = ExecutionParams(min_grip=args.min_grip)
     except ValueError as exc:
