@@ -75,12 +75,17 @@ class GraspEnv(gym.Env):
     scene : {"drop", "isolated", "packed", "pile"}
         How the objects are put on the table (:mod:`graspsim.scenes`); ``"drop"``, the
         default, is the scene of earlier versions.
+    gripper : {"builtin", "franka"} or None
+        The hand (:mod:`graspsim.hands`; :func:`graspsim.gripper.hand_params`), replacing
+        ``execution``'s gripper parameters; None: those of ``execution`` (the built-in hand by
+        default).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
 
     def __init__(self, render_mode=None, objects="test", n_objects=None, declutter=False,
-                 n_candidates=32, noise=None, profile=None, execution=None, scene="drop"):
+                 n_candidates=32, noise=None, profile=None, execution=None, scene="drop",
+                 gripper=None):
         from .profiles import get_profile
         from .trials import resolve_objects
 
@@ -92,6 +97,13 @@ class GraspEnv(gym.Env):
         self.render_mode = render_mode
         self.execution = execution
         self._params = ExecutionParams() if execution is None else execution
+        self.gripper = gripper
+        if gripper is not None:
+            from dataclasses import replace
+
+            from .gripper import hand_params
+
+            self._params = replace(self._params, gripper=hand_params(gripper))
         self.specs = resolve_objects(objects)
         self.declutter = bool(declutter)
         many = declutter or scene in ("packed", "pile")
@@ -140,7 +152,8 @@ class GraspEnv(gym.Env):
     def _label(self):
         f = self._frame
         cands = sample_candidates(f.segmentation, self._bodies.objects, self.np_random,
-                                  self.n_candidates, depth=f.depth_clean)
+                                  self.n_candidates, depth=f.depth_clean,
+                                  max_opening=self._params.gripper.geometry.max_opening)
         # Labelled at the action space's float32 precision, so that stepping with a positive
         # executes exactly the labelled grasp (light objects in marginal grasps are chaotic).
         cands = [GraspRectangle(*r.as_array().astype(np.float32).astype(np.float64))

@@ -316,7 +316,9 @@ def _label_scene(sim, scene, frame, bodies, rng, detector, config, params):
     if config.n_candidates > 0:
         cands = sample_candidates(frame.segmentation, bodies.objects, rng,
                                   config.n_candidates, depth=frame.depth_clean,
-                                  mode=config.sampler, intrinsics=frame.intrinsics)
+                                  mode=config.sampler, intrinsics=frame.intrinsics,
+                                  max_opening=(params or ExecutionParams()).gripper.geometry
+                                  .max_opening)
         kw = {}
         if config.label_with_clean_depth:
             kw = {"depth": frame.depth_clean, "depth_valid": frame.depth_clean > 0}

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from graspsim.hands import HAND_NAMES
 from graspsim.profiles import PROFILES
 from graspsim.scenes import SCENES
 
@@ -61,6 +62,11 @@ def register(subparsers) -> None:
                         "centre; --gripper-aware judges rectangles the same way. Off by "
                         "default (not adopted: README, 'Clutter removal'); recorded in "
                         "config.json")
+    p.add_argument("--gripper", default="builtin", choices=list(HAND_NAMES),
+                   help="the hand: builtin (default: graspsim's parallel jaw) or franka (the "
+                        "Franka Emika hand of pybullet_data's franka_panda, floating as in "
+                        "VGN/GIGA: 8 cm stroke, 70 N grasp force); labelling, --gripper-aware "
+                        "and execution use its geometry; recorded in config.json")
     p.add_argument("--declutter", action="store_true",
                    help="clutter-removal rounds: a lifted object leaves the scene and the "
                         "detector grasps again; reports grasp success and declutter rates "
@@ -70,6 +76,7 @@ def register(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from graspsim.execution import ExecutionParams
+    from graspsim.gripper import hand_params
     from graspsim.trials import TrialConfig, run_trials
 
     k = args.objects_per_scene
@@ -82,7 +89,7 @@ def _run(args: argparse.Namespace) -> int:
     config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler,
                          profile=args.profile, scene=args.scene)
     try:
-        params = ExecutionParams(min_grip=args.min_grip)
+        params = ExecutionParams(min_grip=args.min_grip, gripper=hand_params(args.gripper))
     except ValueError as exc:
         raise ValueError(f"--min-grip: {exc}") from None
     executor = executor_from_args(args)
@@ -90,7 +97,8 @@ def _run(args: argparse.Namespace) -> int:
     if args.gripper_aware:
         from graspsim.detectors import gripper_aware, load_detector
 
-        detector = gripper_aware(load_detector(args.detector), min_grip=args.min_grip)
+        detector = gripper_aware(load_detector(args.detector), min_grip=args.min_grip,
+                                 hand=args.gripper)
         name = f"{args.detector}+aware"
     kwargs = dict(detector=detector, objects=args.objects, n=args.n, seed=args.seed,
                   out=args.out, n_jobs=args.jobs, progress=True, config=config,
