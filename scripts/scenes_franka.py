@@ -201,25 +201,31 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--rows", default=",".join(ROWS))
+    ap.add_argument("--detectors", default=",".join(DETECTORS),
+                    help="run only these (the model is trained only for dlsr, dlsr-paper)")
     ap.add_argument("--steps", type=int, default=len(TRIAL_STEPS) + 1,
                     help="growth steps to run (default: all, up to 200 trials and rounds)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     rows = [r.strip() for r in args.rows.split(",") if r.strip()]
-    unknown = sorted(set(rows) - set(ROWS))
-    if unknown:
-        raise SystemExit(f"unknown rows {', '.join(unknown)}; choose from {', '.join(ROWS)}")
+    dets = [d.strip() for d in args.detectors.split(",") if d.strip()]
+    for given, known, what in ((rows, ROWS, "rows"), (dets, DETECTORS, "detectors")):
+        unknown = sorted(set(given) - set(known))
+        if unknown:
+            raise SystemExit(f"unknown {what} {', '.join(unknown)}; choose from "
+                             f"{', '.join(known)}")
     from graspsim.executor import Executor
 
     args.out.mkdir(parents=True, exist_ok=True)
-    model_path, cfg = model(args.out, args.jobs)
+    model_path, cfg = (model(args.out, args.jobs) if {"dlsr", "dlsr-paper"} & set(dets)
+                       else (None, None))
     ex = Executor(backend="loky" if args.jobs != 1 else "sequential", n_jobs=args.jobs,
                   progress=False)
     for step in range(min(args.steps, max(len(TRIAL_STEPS), len(ROUND_STEPS)))):
         for row in rows:
             steps = TRIAL_STEPS if row == "franka" else ROUND_STEPS
             n = steps[min(step, len(steps) - 1)]
-            for name in DETECTORS:
+            for name in dets:
                 s = run_cell(row, name, n, args.out, model_path, cfg, ex)
                 log.info("%s %s n=%d: %s", row, name, n,
                          {k: s.get(k) for k in ("success_rate", "declutter_rate")})
