@@ -138,3 +138,14 @@ def test_gripper_cli_and_env(tmp_path, capsys, easy_objects):
         assert terminated and reward in (0.0, 1.0) and "failure_reason" in step
     finally:
         env.close()
+
+
+def test_clutter_rounds_with_the_franka_hand(tmp_path, easy_objects):
+    from graspsim.declutter import run_rounds
+
+    out = tmp_path / "rounds"
+    s = run_rounds("mask-pca", easy_objects, n=1, seed=1, out=out, params=FRANKA_PARAMS,
+                   config=TrialConfig(n_candidates=0, n_objects=2, scene="packed"))
+    assert s["rounds"] == 1 and s["attempts"] >= 1
+    assert campaign_execution_params(out) == FRANKA_PARAMS
+    assert "gripper.hand = franka" in (out / "summary.md").read_text()
