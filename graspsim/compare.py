@@ -30,7 +30,8 @@ Folders
 -------
 Trial folders (``config.json`` with ``seed``, ``objects`` and ``config.n_objects``, and
 ``trials.jsonl`` records keyed by ``index`` with ``object`` and ``success``) pair when seed,
-objects and objects per scene agree and every shared index holds the same objects. Score
+objects, objects per scene and scene protocol (``config.scene``, :mod:`graspsim.scenes`)
+agree and every shared index holds the same objects. Score
 folders (``config.json`` with ``dataset_fingerprint``, ``scores.jsonl`` records keyed by
 ``image`` with ``success``) pair when the fingerprints agree. Anything else is refused with a
 one-line ``ValueError`` naming both folders and what differs.
@@ -401,6 +402,10 @@ def _scene_differences(a: dict, b: dict) -> list[str]:
     nb = (cb.get("config") or {}).get("n_objects", 1)
     if na != nb:
         out.append(f"n_objects {na} vs {nb}")
+    sa = (ca.get("config") or {}).get("scene", "drop")
+    sb = (cb.get("config") or {}).get("scene", "drop")
+    if sa != sb:
+        out.append(f"scene {sa} vs {sb}")
     if not out:
         for i in sorted(set(a["records"]) & set(b["records"])):
             oa, ob = a["records"][i].get("object"), b["records"][i].get("object")

@@ -163,7 +163,7 @@ def run_round(sim, specs, detector, seed: int, index: int,
     t0 = time.perf_counter()
     name = _detector_name(detector) if name is None else name
     scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects,
-                                             config.profile)
+                                             config.profile, config.scene)
     placed = [o.spec.name for o in scene.objects]
     record = {"index": index, "seed": seed, "objects": placed, "n_objects": len(placed),
               "redraws": list(scene.redraws)}
@@ -325,7 +325,8 @@ def rounds_markdown(s: dict) -> str:
     lines = [
         f"# Clutter removal: detector `{s.get('detector')}` on `{s.get('objects')}` objects",
         "",
-        f"- rounds: {s['rounds']} of {n_obj} objects (seed {s.get('seed')}); a round ends when "
+        f"- rounds: {s['rounds']} of {n_obj} objects (seed {s.get('seed')}; scene "
+        f"{(s.get('config') or {}).get('scene', 'drop')}); a round ends when "
         f"the table is clear, nothing is proposed, or after {MAX_CONSECUTIVE_FAILURES} "
         "consecutive failures",
         f"- grasp success rate: {s['successes']}/{s['attempts']} = {pct(s['success_rate'])} "

@@ -307,7 +307,8 @@ _SPEC = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)*:[A-Za-z_]\w*(\.[A-Za-z_]\w*)
 
 
 def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
-               unseen_surface: bool = True, min_grip: float | None = None) -> np.ndarray:
+               unseen_surface: bool = True, min_grip: float | None = None,
+               hand: str = "builtin") -> np.ndarray:
     """Which rectangles this gripper can execute, judged from the observation alone.
 
     A rectangle passes when :func:`graspsim.grasp.rectangle_to_grasp` gives it a pose (depth
@@ -339,6 +340,9 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
         Metres. Judge each grasp as a harness with ``ExecutionParams(min_grip=...)`` executes it:
         fingers that would meet a surface stop short of it if they still grip this much
         (:func:`graspsim.grasp.settle_fingers`); None (the harness's default): they do not.
+    hand : {"builtin", "franka"}
+        The gripper's hand, whose geometry (opening, fingers, palm) is checked
+        (:mod:`graspsim.hands`): the harness's ``ExecutionParams.gripper.hand``.
 
     Returns
     -------
@@ -347,6 +351,9 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
     from dlsr.detection import fill_unseen_surface, table_plane_mask, table_surface
 
     from .grasp import fingers_collide, rectangle_to_grasp, settle_fingers
+    from .hands import hand_geometry
+
+    geo = hand_geometry(hand)
 
     for key in ("depth", "K", "T_world_cam"):
         if obs.get(key) is None:
@@ -362,13 +369,15 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
     out = np.zeros(len(rects), dtype=bool)
     grasps = []
     for i, r in enumerate(rects):
-        g = rectangle_to_grasp(r, depth, valid, obs["K"], obs["T_world_cam"])
+        g = rectangle_to_grasp(r, depth, valid, obs["K"], obs["T_world_cam"],
+                               max_opening=geo.max_opening, geometry=geo)
         if min_grip is not None:
             g = settle_fingers(g, depth, valid, obs["K"], obs["T_world_cam"], table_depth,
-                               min_grip=min_grip)
+                               min_grip=min_grip, geometry=geo)
         grasps.append(g)
         out[i] = g.failure is None and not fingers_collide(
-            g, depth, valid, obs["K"], obs["T_world_cam"], table_depth, tolerance=tolerance)
+            g, depth, valid, obs["K"], obs["T_world_cam"], table_depth, tolerance=tolerance,
+            geometry=geo)
     if unseen_surface and out.any():
         if region is None:
             region = table_plane_mask(depth, valid)
@@ -378,7 +387,7 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
             for i in np.flatnonzero(out):
                 strict[i] = not fingers_collide(grasps[i], filled, seen, obs["K"],
                                                 obs["T_world_cam"], table_depth,
-                                                tolerance=tolerance)
+                                                tolerance=tolerance, geometry=geo)
             if strict.any():
                 return strict
     return out
@@ -407,15 +416,19 @@ class GripperAwareDetector:
         See :func:`executable`.
     min_grip : float or None
         See :func:`executable`: set it to the harness's ``ExecutionParams.min_grip``.
+    hand : {"builtin", "franka"}
+        See :func:`executable`: set it to the harness's ``ExecutionParams.gripper.hand``.
     """
 
     def __init__(self, detector, keep: int = 5, tolerance: float = 0.003,
-                 unseen_surface: bool = True, min_grip: float | None = None):
+                 unseen_surface: bool = True, min_grip: float | None = None,
+                 hand: str = "builtin"):
         self.detector = detector
         self.keep = keep
         self.tolerance = tolerance
         self.unseen_surface = unseen_surface
         self.min_grip = min_grip
+        self.hand = hand
 
     @property
     def requires_labels(self) -> bool:
@@ -427,16 +440,19 @@ class GripperAwareDetector:
         if not rects:
             return []
         ok = executable(rects, obs, tolerance=self.tolerance,
-                        unseen_surface=self.unseen_surface, min_grip=self.min_grip)
+                        unseen_surface=self.unseen_surface, min_grip=self.min_grip,
+                        hand=getattr(self, "hand", "builtin"))
         return [r for r, k in zip(rects, ok, strict=True) if k][: self.keep]
 
     def __repr__(self):
+        hand = getattr(self, "hand", "builtin")
         return (f"GripperAwareDetector({self.detector!r}, keep={self.keep}, "
-                f"unseen_surface={self.unseen_surface}, min_grip={self.min_grip})")
+                f"unseen_surface={self.unseen_surface}, min_grip={self.min_grip}"
+                + ("" if hand == "builtin" else f", hand={hand!r}") + ")")
 
 
 def gripper_aware(detector, top_k: int = 40, keep: int = 5, unseen_surface: bool = True,
-                  min_grip: float | None = None) -> GripperAwareDetector:
+                  min_grip: float | None = None, hand: str = "builtin") -> GripperAwareDetector:
     """``detector`` made aware of this gripper (:class:`GripperAwareDetector`).
 
     A DLSR grid detector (:class:`dlsr.detection.DenseDetector` or
@@ -458,6 +474,9 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5, unseen_surface: bool
         The fingers must also miss the object's unseen surface (:func:`executable`).
     min_grip : float or None
         As the harness's ``ExecutionParams.min_grip`` (:func:`executable`).
+    hand : {"builtin", "franka"}
+        As the harness's ``ExecutionParams.gripper.hand``: its largest opening bounds the
+        search and its geometry is checked (:func:`executable`).
 
     Returns
     -------
@@ -467,7 +486,9 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5, unseen_surface: bool
 
     from dlsr.detection import DenseDetector, ExactGridDetector, LatticeDetector
 
-    from .gripper import MAX_OPENING
+    from .hands import hand_geometry
+
+    MAX_OPENING = hand_geometry(hand).max_opening  # noqa: N806
 
     if isinstance(detector, LatticeDetector):
         detector = copy.copy(detector)
@@ -482,7 +503,7 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5, unseen_surface: bool
         if isinstance(detector, DenseDetector) and detector.rescore:
             detector.rescore = max(int(detector.rescore), detector.top_k)
     return GripperAwareDetector(detector, keep=keep, unseen_surface=unseen_surface,
-                                min_grip=min_grip)
+                                min_grip=min_grip, hand=hand)
 
 
 class PluginDetector:

@@ -18,7 +18,10 @@ Reward 1.0 when the grasp lifts an object (>= 10 cm, held by both fingers), else
 when the episode was reset with ``options={"label": True}``: the action against the scene's
 physics-labelled positives (also given as ``info["positives"]`` by ``reset``).
 
-Default episode: one object, one grasp (``terminated`` after the step). ``declutter=True``:
+``scene`` chooses the protocol (:mod:`graspsim.scenes`: ``"drop"``, the default,
+``"isolated"``, ``"packed"``, ``"pile"``; packed and pile scenes have 5 objects unless
+``n_objects`` says otherwise). Default episode: one object, one grasp (``terminated`` after
+the step). ``declutter=True``:
 ``n_objects`` objects; a grasped object is removed (and so are objects pushed off the table,
 listed in ``info["fell_off"]``), the others settle and a new observation is rendered (the scene
 update of :func:`graspsim.declutter.scene_after_grasp`); the episode terminates when the table
@@ -39,7 +42,8 @@ from dlsr.rectangles import GraspRectangle
 
 from .execution import ExecutionParams, execute_grasp, harness_grasps, run_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
-from .scene import build_scene, make_scene
+from .scene import build_scene
+from .scenes import check_scene, make_scene_of
 from .sim import Simulation
 from .trials import profile_capture
 
@@ -70,12 +74,20 @@ class GraspEnv(gym.Env):
         observation space follows its image size.
     execution : graspsim.execution.ExecutionParams or None
         How grasps are executed (and labelled); None: the harness's defaults.
+    scene : {"drop", "isolated", "packed", "pile"}
+        How the objects are put on the table (:mod:`graspsim.scenes`); ``"drop"``, the
+        default, is the scene of earlier versions.
+    gripper : {"builtin", "franka"} or None
+        The hand (:mod:`graspsim.hands`; :func:`graspsim.gripper.hand_params`), replacing
+        ``execution``'s gripper parameters; None: those of ``execution`` (the built-in hand by
+        default).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
 
     def __init__(self, render_mode=None, objects="test", n_objects=None, declutter=False,
-                 n_candidates=32, noise=None, profile=None, execution=None):
+                 n_candidates=32, noise=None, profile=None, execution=None, scene="drop",
+                 gripper=None):
         from .profiles import get_profile
         from .trials import resolve_objects
 
@@ -87,9 +99,18 @@ class GraspEnv(gym.Env):
         self.render_mode = render_mode
         self.execution = execution
         self._params = ExecutionParams() if execution is None else execution
+        self.gripper = gripper
+        if gripper is not None:
+            from dataclasses import replace
+
+            from .gripper import hand_params
+
+            self._params = replace(self._params, gripper=hand_params(gripper))
         self.specs = resolve_objects(objects)
         self.declutter = bool(declutter)
-        self.n_objects = (5 if declutter else 1) if n_objects is None else int(n_objects)
+        many = declutter or scene in ("packed", "pile")
+        self.n_objects = (5 if many else 1) if n_objects is None else int(n_objects)
+        self.scene = check_scene(scene, self.n_objects)
         self.n_candidates = int(n_candidates)
         self.noise = noise
         self.profile = profile
@@ -133,7 +154,8 @@ class GraspEnv(gym.Env):
     def _label(self):
         f = self._frame
         cands = sample_candidates(f.segmentation, self._bodies.objects, self.np_random,
-                                  self.n_candidates, depth=f.depth_clean)
+                                  self.n_candidates, depth=f.depth_clean,
+                                  max_opening=self._params.gripper.geometry.max_opening)
         # Labelled at the action space's float32 precision, so that stepping with a positive
         # executes exactly the labelled grasp (light objects in marginal grasps are chaotic).
         cands = [GraspRectangle(*r.as_array().astype(np.float32).astype(np.float64))
@@ -145,9 +167,9 @@ class GraspEnv(gym.Env):
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         options = options or {}
-        self._scene = make_scene(self.sim, self.specs, self.np_random, n_objects=self.n_objects,
-                                 spread=0.05 if self.n_objects == 1 else 0.1,
-                                 table=self._profile.table)
+        self._scene = make_scene_of(self.scene, self.sim, self.specs, self.np_random,
+                                    n_objects=self.n_objects, table=self._profile.table,
+                                    spread=0.05 if self.n_objects == 1 else 0.1)
         self._label_scenes = bool(options.get("label", False))
         self._positives = None
         obs = self._observe()

@@ -46,14 +46,8 @@ from dataclasses import asdict, dataclass, field, fields
 import numpy as np
 
 from .grasp import Grasp, rectangle_to_grasp, settle_fingers, table_plane_depth
-from .gripper import (
-    FINGER_THICKNESS,
-    PAD_WIDTH,
-    TIP_OFFSET,
-    Gripper,
-    GripperParams,
-    pose_from_matrix,
-)
+from .gripper import Gripper, GripperParams, pose_from_matrix
+from .hands import BUILTIN
 from .scene import Scene, SceneBodies, build_scene
 
 __all__ = [
@@ -206,17 +200,20 @@ class GraspResult:
 
 
 def clamp_to_table(T_world_grasp, table_z: float, clearance: float = 0.001,
-                   opening: float = 0.08) -> np.ndarray:
+                   opening: float = 0.08, geometry=None) -> np.ndarray:
     """Move the grasp back along its approach until the fingertips clear the table.
 
-    The fingertips lie ``TIP_OFFSET`` beyond the TCP; the pads are 2 cm wide (grasp y) and their
-    outer faces ``opening / 2 + 8 mm`` from the centre (grasp x), so the lowest pad corner is
-    bounded with the tilt of the approach.
+    The fingertips lie ``tip_offset`` beyond the TCP; the pads are ``pad_width`` wide (grasp y)
+    and their outer faces ``opening / 2 + finger_thickness`` from the centre (grasp x), so the
+    lowest pad corner is bounded with the tilt of the approach (``geometry``, a
+    :class:`graspsim.hands.HandGeometry`; None: the built-in hand's 1 cm, 2 cm and 8 mm).
     """
+    hand = BUILTIN if geometry is None else geometry
     T = np.array(T_world_grasp, dtype=float)
     a = T[:3, 2]
-    half_x = opening / 2 + FINGER_THICKNESS
-    lowest = T[2, 3] + TIP_OFFSET * a[2] - PAD_WIDTH / 2 * abs(T[2, 1]) - half_x * abs(T[2, 0])
+    half_x = opening / 2 + hand.finger_thickness
+    lowest = (T[2, 3] + hand.tip_offset * a[2] - hand.pad_width / 2 * abs(T[2, 1])
+              - half_x * abs(T[2, 0]))
     gap = lowest - (table_z + clearance)
     if gap < 0 and a[2] < -1e-6:
         T[:3, 3] += (gap / -a[2]) * a  # gap < 0, -a[2] > 0: move back against the approach
@@ -227,7 +224,8 @@ def harness_grasps(rects, frame, table_z: float, params: ExecutionParams | None 
                    depth=None, depth_valid=None, **pose) -> list[Grasp]:
     """The poses the harness executes for image rectangles seen in ``frame``.
 
-    Each rectangle becomes a pose by :func:`graspsim.grasp.rectangle_to_grasp`; when
+    Each rectangle becomes a pose by :func:`graspsim.grasp.rectangle_to_grasp` for the hand of
+    ``params.gripper`` (its geometry and largest opening); when
     ``params.min_grip`` is set, fingers that would meet a surface above the table on the way
     down stop short of it if they still grip that much of the object
     (:func:`graspsim.grasp.settle_fingers`, with the table plane at ``table_z``).
@@ -253,13 +251,16 @@ def harness_grasps(rects, frame, table_z: float, params: ExecutionParams | None 
     p = ExecutionParams() if params is None else params
     depth = frame.depth if depth is None else depth
     valid = frame.depth_valid if depth_valid is None else depth_valid
-    grasps = [rectangle_to_grasp(r, depth, valid, frame.intrinsics, frame.T_world_cam, **pose)
+    hand = p.gripper.geometry
+    pose = {"max_opening": hand.max_opening, **pose}
+    grasps = [rectangle_to_grasp(r, depth, valid, frame.intrinsics, frame.T_world_cam,
+                                 geometry=hand, **pose)
               for r in rects]
     if p.min_grip is None or not grasps:
         return grasps
     table = table_plane_depth(frame.intrinsics, frame.T_world_cam, table_z, np.shape(depth))
     return [settle_fingers(g, depth, valid, frame.intrinsics, frame.T_world_cam, table,
-                           min_grip=p.min_grip, tip_clearance=p.tip_clearance)
+                           min_grip=p.min_grip, tip_clearance=p.tip_clearance, geometry=hand)
             for g in grasps]
 
 
@@ -297,7 +298,8 @@ def execute_grasp(sim, scene: Scene, bodies: SceneBodies, grasp: Grasp,
     c = sim.client
     frames = []
     steps0 = sim.steps
-    T = clamp_to_table(grasp.T_world_grasp, scene.table_z, p.tip_clearance, grasp.opening)
+    T = clamp_to_table(grasp.T_world_grasp, scene.table_z, p.tip_clearance, grasp.opening,
+                       p.gripper.geometry)
     a = T[:3, 2]
     T_pre = T.copy()
     T_pre[:3, 3] -= p.pregrasp_distance * a
@@ -403,7 +405,8 @@ def precheck_grasps(sim, scene: Scene, grasps, params: ExecutionParams | None = 
       line and stops at the first contact closer than 0.5 mm, so it cannot pass there.
     * The way in stays at least ``clearance`` from everything (which covers the base's small
       overshoot at arrival) **and** no object comes within ``region_margin`` of the space
-      between the open pads (``opening`` x 2 cm x 5 cm): ``"nothing between the jaws"``; the
+      between the open pads (``opening`` x pad width x pad length, 2 cm x 5 cm for the
+      built-in hand): ``"nothing between the jaws"``; the
       closing pads sweep only that space and nothing can enter it.
     * Anything else (near contacts, an object between the jaws) is left undecided: None.
 
@@ -438,9 +441,11 @@ def precheck_grasps(sim, scene: Scene, grasps, params: ExecutionParams | None = 
     others = [bodies.table, *bodies.objects]
     gripper = None
     query = p.pregrasp_distance + 0.05
+    hand = p.gripper.geometry
     for i in todo:
         g = grasps[i]
-        T = clamp_to_table(g.T_world_grasp, scene.table_z, p.tip_clearance, g.opening)
+        T = clamp_to_table(g.T_world_grasp, scene.table_z, p.tip_clearance, g.opening,
+                           hand)
         a = T[:3, 2]
         T_pre = T.copy()
         T_pre[:3, 3] -= p.pregrasp_distance * a
@@ -471,9 +476,9 @@ def precheck_grasps(sim, scene: Scene, grasps, params: ExecutionParams | None = 
             continue
         if not clear:
             continue
-        half = [g.opening / 2, 0.01, 0.025]
+        half = [g.opening / 2, hand.pad_width / 2, hand.pad_length / 2]
         shape = c.createCollisionShape(c.GEOM_BOX, halfExtents=half)
-        centre = (T @ np.array([0.0, 0.0, TIP_OFFSET - half[2], 1.0]))[:3]
+        centre = (T @ np.array([0.0, 0.0, hand.tip_offset - half[2], 1.0]))[:3]
         empty = all(
             not c.getClosestPoints(bodyA=-1, bodyB=b, distance=region_margin,
                                    collisionShapeA=shape,

@@ -37,14 +37,7 @@ import numpy as np
 from dlsr.datasets import check_camera_matrix
 from dlsr.rectangles import GraspRectangle
 
-from .gripper import (
-    FINGER_THICKNESS,
-    PAD_WIDTH,
-    PALM_LENGTH,
-    PALM_OFFSET,
-    PALM_WIDTH,
-    TIP_OFFSET,
-)
+from .hands import BUILTIN
 
 __all__ = [
     "Grasp",
@@ -192,6 +185,7 @@ def rectangle_to_grasp(
     max_opening: float = 0.08,
     palm_clearance: float = 0.005,
     palm_percentile: float = 2.0,
+    geometry=None,
 ) -> Grasp:
     """Turn an image rectangle into a gripper pose.
 
@@ -219,6 +213,8 @@ def rectangle_to_grasp(
         Percentile of the valid depth under the palm's footprint taken as its nearest surface
         (lower than the rectangle's 5: the footprint is larger, a mug's rim a smaller part of
         it).
+    geometry : graspsim.hands.HandGeometry or None
+        The hand's palm offset and footprint (None: the built-in hand's).
 
     Returns
     -------
@@ -248,10 +244,12 @@ def rectangle_to_grasp(
     T_cam_grasp[:3, 0], T_cam_grasp[:3, 1], T_cam_grasp[:3, 2] = x_cam, y_cam, z_cam
     # As deep as asked, but the palm stays clear of the nearest surface between the jaws and
     # under the palm (its footprint measured at the surface depth z).
-    palm = GraspRectangle(rect.x, rect.y, rect.theta, PALM_LENGTH * fx / z, PALM_WIDTH * fy / z)
+    hand = BUILTIN if geometry is None else geometry
+    palm = GraspRectangle(rect.x, rect.y, rect.theta, hand.palm_length * fx / z,
+                          hand.palm_width * fy / z)
     nearest = min(nearest_depth(rect, depth, valid),
                   nearest_depth(palm, depth, valid, percentile=palm_percentile))
-    reach = min(depth_offset, nearest + PALM_OFFSET - palm_clearance - z)
+    reach = min(depth_offset, nearest + hand.palm_offset - palm_clearance - z)
     T_cam_grasp[:3, 3] = p_cam + reach * z_cam
     T_world_grasp = T_world_cam @ T_cam_grasp
     opening = float(min(width + margin, max_opening))
@@ -261,7 +259,7 @@ def rectangle_to_grasp(
 
 def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_depth=None,
                     tolerance: float = 0.003, tip_clearance: float = 0.001,
-                    samples: tuple[int, int] = (9, 21)) -> bool:
+                    samples: tuple[int, int] = (9, 21), geometry=None) -> bool:
     """Whether the open fingers, coming down along the approach, would land on a seen surface.
 
     A depth-only check a detector can run before proposing a grasp (the gripper's geometry and
@@ -293,6 +291,8 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
         camera's working distance (1.3 mm at 0.7 m with f = 550 px), so a rim or edge inside
         the footprint cannot fall between two samples (the earlier (3, 7), 4 mm and 3.3 mm
         apart, let the gripper-aware detectors choose grasps whose fingers met such edges).
+    geometry : graspsim.hands.HandGeometry or None
+        The hand's finger thickness, pad width and tip offset (None: the built-in hand's).
 
     Returns
     -------
@@ -301,22 +301,23 @@ def fingers_collide(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_d
     """
     if grasp.T_world_grasp is None:
         return True
-    fp = _finger_footprint(grasp, depth, intrinsics, T_world_cam, samples)
+    fp = _finger_footprint(grasp, depth, intrinsics, T_world_cam, samples, geometry)
     if fp is None:
         return True
     d, ok, tip = _footprint_depths(fp, depth, valid, table_depth, tip_clearance)
     return bool(np.any(d[ok] < tip - tolerance))
 
 
-def _finger_footprint(grasp: Grasp, depth, intrinsics, T_world_cam, samples):
+def _finger_footprint(grasp: Grasp, depth, intrinsics, T_world_cam, samples, geometry=None):
     """Pixels ``(v, u)`` of both fingers' footprints and the fingertips' camera depth before
     any table clamp; None when a point falls outside the image or behind the camera."""
     K = check_camera_matrix(intrinsics, "intrinsics")
     H, W = np.shape(depth)
     T_cam_grasp = np.linalg.inv(np.asarray(T_world_cam, dtype=float)) @ grasp.T_world_grasp
     R, o = T_cam_grasp[:3, :3], T_cam_grasp[:3, 3]
-    a = (grasp.opening / 2 + np.linspace(0.0, FINGER_THICKNESS, samples[0]))[:, None]
-    b = np.linspace(-PAD_WIDTH / 2, PAD_WIDTH / 2, samples[1])[None, :]
+    hand = BUILTIN if geometry is None else geometry
+    a = (grasp.opening / 2 + np.linspace(0.0, hand.finger_thickness, samples[0]))[:, None]
+    b = np.linspace(-hand.pad_width / 2, hand.pad_width / 2, samples[1])[None, :]
     A = np.concatenate([a, -a]) * np.ones_like(b)
     B = np.ones_like(a.repeat(2, axis=0)) * b
     P = o + A.reshape(-1, 1) * R[:, 0] + B.reshape(-1, 1) * R[:, 1]  # footprint at the TCP
@@ -326,7 +327,7 @@ def _finger_footprint(grasp: Grasp, depth, intrinsics, T_world_cam, samples):
     v = np.rint(K[1, 1] * P[:, 1] / P[:, 2] + K[1, 2]).astype(np.intp)
     if u.min() < 0 or u.max() >= W or v.min() < 0 or v.max() >= H:
         return None
-    return v, u, o[2] + TIP_OFFSET * R[2, 2], R[2, 2]
+    return v, u, o[2] + hand.tip_offset * R[2, 2], R[2, 2]
 
 
 def _footprint_depths(fp, depth, valid, table_depth, tip_clearance):
@@ -342,7 +343,8 @@ def _footprint_depths(fp, depth, valid, table_depth, tip_clearance):
 
 def settle_fingers(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_depth=None,
                    min_grip: float = 0.01, clearance: float = 0.002, tolerance: float = 0.003,
-                   tip_clearance: float = 0.001, samples: tuple[int, int] = (9, 21)) -> Grasp:
+                   tip_clearance: float = 0.001, samples: tuple[int, int] = (9, 21),
+                   geometry=None) -> Grasp:
     """Stop the fingers short of a surface they would meet on the way down, if they still grip.
 
     Where :func:`fingers_collide` finds a surface seen in a finger's footprint more than
@@ -371,6 +373,8 @@ def settle_fingers(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_de
         Metres.
     samples : (int, int)
         As :func:`fingers_collide`.
+    geometry : graspsim.hands.HandGeometry or None
+        As :func:`fingers_collide`.
 
     Returns
     -------
@@ -378,7 +382,7 @@ def settle_fingers(grasp: Grasp, depth, valid, intrinsics, T_world_cam, table_de
     """
     if grasp.T_world_grasp is None or grasp.failure is not None or not np.isfinite(grasp.depth):
         return grasp
-    fp = _finger_footprint(grasp, depth, intrinsics, T_world_cam, samples)
+    fp = _finger_footprint(grasp, depth, intrinsics, T_world_cam, samples, geometry)
     if fp is None:
         return grasp
     d, ok, tip = _footprint_depths(fp, depth, valid, table_depth, tip_clearance)

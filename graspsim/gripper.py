@@ -17,25 +17,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .objects import assets_dir
+from .hands import BUILTIN, check_hand, hand_geometry, hand_urdf
 
-__all__ = ["Gripper", "GripperParams", "gripper_urdf", "pose_from_matrix", "matrix_from_pose"]
+__all__ = ["Gripper", "GripperParams", "gripper_urdf", "hand_params", "pose_from_matrix",
+           "matrix_from_pose"]
 
-MAX_OPENING = 0.08  #: m, largest opening between the pads.
-TIP_OFFSET = 0.01  #: m, fingertips lie this far beyond the TCP along the approach (+z).
-PALM_OFFSET = 0.04  #: m, the palm's face lies this far behind the TCP (5 cm pads minus the tips).
-FINGER_THICKNESS = 0.008  #: m, each finger's thickness along the closing direction.
-PAD_WIDTH = 0.02  #: m, the pads' width across the closing direction.
-PALM_LENGTH = 0.11  #: m, the palm's length along the closing direction.
-PALM_WIDTH = 0.03  #: m, the palm's width across the closing direction.
+# The built-in hand's dimensions (graspsim.hands.BUILTIN), metres.
+MAX_OPENING = BUILTIN.max_opening  #: largest opening between the pads.
+TIP_OFFSET = BUILTIN.tip_offset  #: fingertips lie this far beyond the TCP along the approach.
+PALM_OFFSET = BUILTIN.palm_offset  #: the palm's face lies this far behind the TCP.
+FINGER_THICKNESS = BUILTIN.finger_thickness  #: each finger's thickness (closing direction).
+PAD_WIDTH = BUILTIN.pad_width  #: the pads' width across the closing direction.
+PALM_LENGTH = BUILTIN.palm_length  #: the palm's length along the closing direction.
+PALM_WIDTH = BUILTIN.palm_width  #: the palm's width across the closing direction.
 
 
-def gripper_urdf():
-    """Path of the gripper URDF, resolved from the installed assets (never the cwd)."""
-    path = assets_dir() / "gripper" / "parallel_jaw.urdf"
-    if not path.exists():
-        raise FileNotFoundError(f"gripper URDF not found: {path}")
-    return path
+def gripper_urdf(hand: str = "builtin"):
+    """Path of a hand's URDF: the built-in one resolved from the installed assets (never the
+    cwd), the Franka hand's written on first use (:func:`graspsim.hands.hand_urdf`)."""
+    return hand_urdf(hand)
 
 
 @dataclass(frozen=True)
@@ -52,12 +52,40 @@ class GripperParams:
         Lateral friction coefficient of the pads.
     arm_force : float
         N, ``maxForce`` of the base constraint (what the "arm" can push or lift).
+    hand : {"builtin", "franka"}
+        Which hand (:mod:`graspsim.hands`): its URDF and geometry. ``"franka"`` is meant with
+        ``finger_force`` :data:`graspsim.hands.FRANKA_FORCE` (:func:`hand_params`).
     """
 
     finger_force: float = 40.0
     finger_speed: float = 0.2
     finger_friction: float = 1.0
     arm_force: float = 300.0
+    hand: str = "builtin"
+
+    def __post_init__(self):
+        check_hand(self.hand)
+
+    @property
+    def geometry(self):
+        """The hand's :class:`graspsim.hands.HandGeometry`."""
+        return hand_geometry(self.hand)
+
+
+def hand_params(hand: str = "builtin") -> GripperParams:
+    """The gripper parameters of a hand: the defaults, with the Franka hand's documented grasp
+    force (:data:`graspsim.hands.FRANKA_FORCE`) for ``"franka"``.
+
+    Raises
+    ------
+    ValueError
+        One line, for an unknown hand.
+    """
+    from .hands import FRANKA_FORCE
+
+    if check_hand(hand) == "franka":
+        return GripperParams(hand="franka", finger_force=FRANKA_FORCE)
+    return GripperParams()
 
 
 def matrix_from_pose(client, position, quaternion) -> np.ndarray:
@@ -104,8 +132,9 @@ class Gripper:
     T_world_tcp : ndarray of shape (4, 4)
         Initial TCP pose (the gripper is teleported there, fingers at ``opening``).
     opening : float
-        Initial opening between the pads, metres (clipped to [0, 0.08]).
+        Initial opening between the pads, metres (clipped to [0, the hand's largest]).
     params : GripperParams or None
+        Its ``hand`` chooses the URDF (:mod:`graspsim.hands`).
     """
 
     def __init__(self, sim, T_world_tcp, opening: float = MAX_OPENING,
@@ -114,7 +143,7 @@ class Gripper:
         self.params = GripperParams() if params is None else params
         c = sim.client
         pos, orn = pose_from_matrix(T_world_tcp)
-        self.body = c.loadURDF(str(gripper_urdf()), pos, orn)
+        self.body = c.loadURDF(str(gripper_urdf(self.params.hand)), pos, orn)
         self.fingers = (0, 1)  # joint (= link) indices of the left and right finger
         for j in self.fingers:
             c.changeDynamics(self.body, j, lateralFriction=self.params.finger_friction,
@@ -163,7 +192,7 @@ class Gripper:
     def set_opening(self, opening: float, reset: bool = False) -> None:
         """Command the opening (metres); ``reset=True`` also puts the fingers there instantly."""
         c = self.sim.client
-        q = float(np.clip(opening, 0.0, MAX_OPENING)) / 2
+        q = float(np.clip(opening, 0.0, self.params.geometry.max_opening)) / 2
         if reset:
             for j in self.fingers:
                 c.resetJointState(self.body, j, q, 0.0)

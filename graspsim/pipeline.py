@@ -549,7 +549,8 @@ def _paper_model_path(model_path: Path, config: RunConfig) -> Path:
     return model_path.with_name("dlsr-paper") if config.physical else model_path
 
 
-def _trial_detector(name: str, model_path: Path, config: RunConfig):
+def _trial_detector(name: str, model_path: Path, config: RunConfig, hand: str = "builtin"):
+    """The detector ``name`` of the trial stage (DLSR's made aware of ``hand``'s geometry)."""
     if name in ("dlsr", "dlsr-paper"):
         from dlsr.detection import DLSRDetector
 
@@ -563,7 +564,7 @@ def _trial_detector(name: str, model_path: Path, config: RunConfig):
         if name == "dlsr" and config.gripper_aware:
             from .detectors import gripper_aware
 
-            det = gripper_aware(det)
+            det = gripper_aware(det, hand=hand)
         return det
     from .detectors import load_detector
 

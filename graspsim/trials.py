@@ -66,7 +66,8 @@ from .graspability import apply_graspability
 from .labelling import label_rectangles, rank_positives, sample_candidates
 from .object_sets import ObjectSet, as_object_set, check_same_object_set
 from .objects import ObjectSpec
-from .scene import build_scene, capture, make_scene
+from .scene import build_scene, capture
+from .scenes import check_scene, make_scene_of
 from .sim import Simulation
 
 __all__ = [
@@ -111,6 +112,9 @@ class TrialConfig:
         How scenes are seen: a name in :data:`graspsim.profiles.PROFILES` (camera height and
         intrinsics, table colour, lighting, depth noise); the objects and poses of trial ``i``
         do not depend on it.
+    scene : {"drop", "isolated", "packed", "pile"}
+        How the objects are put on the table (:mod:`graspsim.scenes`); ``"drop"``, the
+        default, is what every campaign ran before the option existed.
     """
 
     n_candidates: int = 32
@@ -118,6 +122,7 @@ class TrialConfig:
     label_with_clean_depth: bool = False
     sampler: str = "mixed"
     profile: str = "default"
+    scene: str = "drop"
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -218,11 +223,13 @@ def trial_streams(seed: int, index: int) -> dict:
     }
 
 
-def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile=None):
+def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile=None,
+                  scene: str = "drop"):
     """Build trial ``index``'s seeded scene in ``sim`` and take its observation.
 
-    ``profile`` (a :class:`graspsim.profiles.SimProfile` or a name in
-    :data:`graspsim.profiles.PROFILES`; None for the default) sets the camera height and
+    ``scene`` is the protocol (:func:`graspsim.scenes.make_scene_of`). ``profile`` (a
+    :class:`graspsim.profiles.SimProfile` or a name in :data:`graspsim.profiles.PROFILES`;
+    None for the default) sets the camera height and
     intrinsics, table colour, lighting ranges and depth noise; the objects and their poses are
     the same under every profile.
 
@@ -246,12 +253,13 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile
     prof = get_profile(profile)
     st = trial_streams(seed, index)
     try:
-        scene = make_scene(sim, specs, st["scene"], n_objects=n_objects, table=prof.table)
+        placed = make_scene_of(scene, sim, specs, st["scene"], n_objects=n_objects,
+                               table=prof.table)
     except ValueError as exc:
         raise ValueError(f"scene {index} of seed {seed}: {exc}") from None
-    bodies = build_scene(sim, scene)
-    frame = profile_capture(sim, scene, bodies, st["camera"], prof)
-    return scene, bodies, frame, st
+    bodies = build_scene(sim, placed)
+    frame = profile_capture(sim, placed, bodies, st["camera"], prof)
+    return placed, bodies, frame, st
 
 
 def profile_capture(sim, scene, bodies, rng, profile=None, noise=None):
@@ -319,7 +327,9 @@ def _label_scene(sim, scene, frame, bodies, rng, detector, config, params):
     if config.n_candidates > 0:
         cands = sample_candidates(frame.segmentation, bodies.objects, rng,
                                   config.n_candidates, depth=frame.depth_clean,
-                                  mode=config.sampler, intrinsics=frame.intrinsics)
+                                  mode=config.sampler, intrinsics=frame.intrinsics,
+                                  max_opening=(params or ExecutionParams()).gripper.geometry
+                                  .max_opening)
         kw = {}
         if config.label_with_clean_depth:
             kw = {"depth": frame.depth_clean, "depth_valid": frame.depth_clean > 0}
@@ -415,7 +425,7 @@ def run_trial(sim, specs, detector, seed: int, index: int,
     """
     t0 = time.perf_counter()
     scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects,
-                                             config.profile)
+                                             config.profile, config.scene)
     positives, n_labelled, (rects, scores, error, planning) = _label_and_propose(
         sim, scene, frame, bodies, st, detector, config, params, name,
         f"trial {index} (seed {seed})")
@@ -529,6 +539,7 @@ def _campaign_setup(detector, detector_name, objects, n: int, seed: int, config,
     """The detector, the object specs and the arguments a campaign folder records
     (``config.json``, with the execution parameters) for :func:`run_trials` and
     :func:`graspsim.declutter.run_rounds`."""
+    check_scene(config.scene, config.n_objects)
     det, det_name = _resolve(detector, detector_name)
     specs = resolve_objects(objects)
     if n < 0:
@@ -721,7 +732,8 @@ def summary_markdown(s: dict) -> str:
     lines = [
         f"# Grasp trials: detector `{s.get('detector')}` on `{s.get('objects')}` objects",
         "",
-        f"- trials: {s['n']} (seed {s.get('seed')})",
+        f"- trials: {s['n']} (seed {s.get('seed')}; scene "
+        f"{(s.get('config') or {}).get('scene', 'drop')})",
         f"- physical success: {s['successes']}/{s['n']} = {pct(s['success_rate'])} "
         f"(Wilson 95 % interval {pct(s['success_ci95'][0])} - {pct(s['success_ci95'][1])})",
         f"- on graspable objects: {pct(s['graspable_success_rate'])} "

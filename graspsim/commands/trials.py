@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
+from graspsim.hands import HAND_NAMES
 from graspsim.profiles import PROFILES
+from graspsim.scenes import SCENES
 
 from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
 
@@ -44,7 +46,13 @@ def register(subparsers) -> None:
                    help="how scenes are seen: camera, table, lighting, depth noise "
                         "(docs/sim_settings.md; default: %(default)s)")
     p.add_argument("--objects-per-scene", type=int, default=None,
-                   help="1: Cornell-like (default); >1 clutter (default 5 with --declutter)")
+                   help="1: Cornell-like (default); >1 clutter (default 5 with --declutter, "
+                        "--scene packed or --scene pile)")
+    p.add_argument("--scene", default="drop", choices=list(SCENES),
+                   help="how objects are put on the table: drop (default: dropped one by one "
+                        "at random poses), isolated (drop with one object), packed (upright "
+                        "side by side, VGN/GIGA), pile (dropped into a box, then the box "
+                        "removed, VGN/GIGA); recorded in config.json")
     p.add_argument("--min-grip", type=float, default=None, metavar="METRES",
                    help="fingers that would meet a surface above the table on the way down "
                         "(a plate or bowl under the object) stop 2 mm short of it when their "
@@ -52,6 +60,11 @@ def register(subparsers) -> None:
                         "centre; --gripper-aware judges rectangles the same way. Off by "
                         "default (not adopted: README, 'Clutter removal'); recorded in "
                         "config.json")
+    p.add_argument("--gripper", default="builtin", choices=list(HAND_NAMES),
+                   help="the hand: builtin (default: graspsim's parallel jaw) or franka (the "
+                        "Franka Emika hand of pybullet_data's franka_panda, floating as in "
+                        "VGN/GIGA: 8 cm stroke, 70 N grasp force); labelling, --gripper-aware "
+                        "and execution use its geometry; recorded in config.json")
     p.add_argument("--declutter", action="store_true",
                    help="clutter-removal rounds: a lifted object leaves the scene and the "
                         "detector grasps again; reports grasp success and declutter rates "
@@ -61,19 +74,20 @@ def register(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from graspsim.execution import ExecutionParams
+    from graspsim.gripper import hand_params
     from graspsim.trials import TrialConfig, run_trials
 
     k = args.objects_per_scene
     if k is None:
-        k = 5 if args.declutter else 1
+        k = 5 if args.declutter or args.scene in ("packed", "pile") else 1
     if k < 1:
         raise ValueError(f"--objects-per-scene must be >= 1, got {k}")
     if args.n < 0:
         raise ValueError(f"--n must be >= 0, got {args.n}")
     config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler,
-                         profile=args.profile)
+                         profile=args.profile, scene=args.scene)
     try:
-        params = ExecutionParams(min_grip=args.min_grip)
+        params = ExecutionParams(min_grip=args.min_grip, gripper=hand_params(args.gripper))
     except ValueError as exc:
         raise ValueError(f"--min-grip: {exc}") from None
     executor = executor_from_args(args)
@@ -81,7 +95,8 @@ def _run(args: argparse.Namespace) -> int:
     if args.gripper_aware:
         from graspsim.detectors import gripper_aware, load_detector
 
-        detector = gripper_aware(load_detector(args.detector), min_grip=args.min_grip)
+        detector = gripper_aware(load_detector(args.detector), min_grip=args.min_grip,
+                                 hand=args.gripper)
         name = f"{args.detector}+aware"
     kwargs = dict(detector=detector, objects=object_set_from_args(args), n=args.n, seed=args.seed,
                   out=args.out, n_jobs=args.jobs, progress=True, config=config,
