@@ -196,6 +196,7 @@ def detection_benchmark(
     save_model=None, extra_patches=None, extra_train=None, extra_format: str | None = None,
     extra_scale=None, extra_mapping=None, model=None, physical: bool = False, seed: int = 0,
     progress: bool = True, executor=None, options=None, images=None,
+    train_positives: int | None = None,
 ) -> dict:
     """Cross-validated detection accuracy by the rectangle metric (the paper's Table 2).
 
@@ -248,7 +249,9 @@ def detection_benchmark(
     matrices, :mod:`dlsr.intrinsics`).
 
     ``images`` (a collection of image ids) keeps only those images of ``data`` (for the
-    inner folds of :func:`nested_detector_choice`).
+    inner folds of :func:`nested_detector_choice`). ``train_positives`` trains each fold on a
+    seeded random subset of at most that many positives per training image (a cheaper
+    training; the test images keep all theirs for the rectangle metric).
 
     Test images of a fold are detected through ``executor`` (a
     :class:`graspsim.executor.Executor`: local processes or a Ray cluster; sequential when
@@ -372,6 +375,8 @@ def detection_benchmark(
         config["physical"] = True
     if options is not None:
         config["options"] = dataclasses.asdict(options)
+    if train_positives is not None:
+        config["train_positives"] = int(train_positives)
     if images is not None:
         config["images"] = hashlib.sha1(" ".join(sorted(str(i) for i in images))
                                         .encode()).hexdigest()[:12]
@@ -392,7 +397,7 @@ def detection_benchmark(
                                         "n_patches", "grid_negatives", "fit_grid", "region",
                                         "n_images", "seed", "hard_negatives", "hard_rounds",
                                         "extra_patches", "extra_train", "physical",
-                                        "images")
+                                        "images", "train_positives")
                  if k in config}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
@@ -418,7 +423,8 @@ def detection_benchmark(
             fold_model = DLSRDetector.load(mpath)
         else:
             fold_model = train_detector(
-                [samples[i] for i in train] + extra_samples, learner=learner, encoder=encoder,
+                _fewer_positives([samples[i] for i in train], train_positives, seed + k)
+                + extra_samples, learner=learner, encoder=encoder,
                 encoder_param=encoder_param, C=C, n_atoms=n_atoms, n_patches=n_patches,
                 grid_negatives=grid_negatives, fit_grid=fit_grid,
                 hard_negatives=hard_negatives, hard_rounds=hard_rounds, extra_patches=extra,
@@ -501,6 +507,21 @@ def detection_benchmark(
         full.save(save_model)
         summary["model"] = str(save_model)
     return summary
+
+
+def _fewer_positives(samples, n: int | None, seed: int):
+    """``samples`` with at most ``n`` of their positives each (a seeded random subset, in
+    their order); ``samples`` itself when ``n`` is None."""
+    if n is None:
+        return samples
+    if n < 1:
+        raise ValueError(f"train_positives must be >= 1, got {n}")
+    rng = np.random.default_rng(seed)
+    out = []
+    for s in samples:
+        keep = np.sort(rng.choice(len(s.positives), min(n, len(s.positives)), replace=False))
+        out.append(dataclasses.replace(s, positives=[s.positives[i] for i in keep]))
+    return out
 
 
 def _benchmark_detector(model, kind: str, region: str, rescore: int, coarse_to_fine: bool,

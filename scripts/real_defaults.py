@@ -35,6 +35,8 @@ def main(argv=None) -> int:
     p.add_argument("--atoms", type=int, default=50)
     p.add_argument("--patches", type=int, default=10_000)
     p.add_argument("--rescore", type=int, default=50)
+    p.add_argument("--train-positives", type=int, default=20,
+                   help="positives per training image (a cheaper training; 0: all)")
     p.add_argument("--seed", type=int, default=0)
     add_executor_args(p)
     p.add_argument("--out", required=True)
@@ -43,7 +45,8 @@ def main(argv=None) -> int:
         args.data, args.format, args.out, n_folds=args.folds, inner_folds=args.inner_folds,
         inner_views=args.inner_views or None, seed=args.seed, scale=args.scale,
         n_atoms=args.atoms, n_patches=args.patches, rescore=args.rescore,
-        coarse_to_fine=True, executor=executor_from_args(args))
+        coarse_to_fine=True, train_positives=args.train_positives or None,
+        executor=executor_from_args(args))
     json.dump({k: result[k] for k in ("chosen", "chosen_counts", "table", "tests")},
               sys.stdout, indent=2)
     print()

@@ -83,3 +83,34 @@ def test_unknown_preset_is_refused_by_the_parser(capsys):
         build_parser().parse_args(["detect", "--model", "m", "--rgb", "r", "--depth", "d",
                                    "--preset", "nope"])
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_benchmark_keeps_the_given_images_and_fewer_training_positives(tmp_path, box_samples,
+                                                                      monkeypatch):
+    """What :func:`graspsim.benchmarks.nested_detector_choice` relies on: ``images`` keeps
+    only those images, ``train_positives`` trains on at most that many positives each."""
+    import dlsr.detection
+    from dlsr.datasets import write_cornell
+    from graspsim.benchmarks import detection_benchmark
+
+    root = write_cornell(box_samples(6), tmp_path / "cornell")
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_train(samples, **kw):
+        seen.append(samples)
+        raise Stop
+
+    monkeypatch.setattr(dlsr.detection, "train_detector", fake_train)
+    with pytest.raises(Stop):
+        detection_benchmark(root, "cornell", tmp_path / "o", split="image", n_folds=2,
+                            images=["0100", "0101", "0102", "0103"], train_positives=1,
+                            options=PRESETS["paper"], progress=False)
+    (train,) = seen
+    assert len(train) == 2 and {s.image_id for s in train} <= {"0100", "0101", "0102", "0103"}
+    assert all(len(s.positives) == 1 for s in train)
+    with pytest.raises(ValueError, match="not among the labelled images"):
+        detection_benchmark(root, "cornell", tmp_path / "o", split="image", n_folds=2,
+                            images=["9999"], progress=False)
