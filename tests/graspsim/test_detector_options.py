@@ -114,3 +114,11 @@ def test_benchmark_keeps_the_given_images_and_fewer_training_positives(tmp_path,
     with pytest.raises(ValueError, match="not among the labelled images"):
         detection_benchmark(root, "cornell", tmp_path / "o", split="image", n_folds=2,
                             images=["9999"], progress=False)
+
+
+def test_search_grid_keeps_complete_region_through_its_dict():
+    from dlsr.detection import PAPER_GRID, SearchGrid
+
+    assert "complete_region" not in PAPER_GRID.to_dict()  # earlier models' grids unchanged
+    grid = dataclasses.replace(PAPER_GRID, complete_region=True)
+    assert SearchGrid.from_dict(grid.to_dict()) == grid
