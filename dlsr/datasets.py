@@ -27,6 +27,13 @@ import cv2
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
+from .intrinsics import (  # noqa: F401  (check_camera_matrix: importable from here too)
+    check_camera_matrix,
+    cornell_camera_matrix,
+    jacquard_camera_matrix,
+    read_camera_matrix,
+    read_pcd_points,
+)
 from .metrics import rectangle_metric_many
 from .records import CorruptFileError, check_magic, file_errors, write_text_atomic
 from .rectangles import GraspRectangle, array_to_rects, rects_to_array
@@ -194,40 +201,9 @@ def read_pcd_depth(path, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray
     valid : ndarray of shape (H, W), bool
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"point cloud not found: {path}")
-    header: dict[str, list[str]] = {}
-    with file_errors(path, "point cloud"), open(path, encoding="utf-8") as fh:
-        n_header = 0
-        for line in fh:
-            n_header += 1
-            s = line.strip()
-            if not s or s.startswith("#"):
-                continue
-            key, *vals = s.split()
-            header[key.upper()] = vals
-            if key.upper() == "DATA":
-                break
-        else:
-            raise CorruptFileError(f"point cloud {path}: no DATA line in the PCD header")
-    if header["DATA"] != ["ascii"]:
-        raise ValueError(
-            f"point cloud {path}: only 'DATA ascii' is supported, got {header['DATA']}"
-        )
-    fields = header.get("FIELDS")
-    if not fields or not {"x", "y", "z", "index"} <= set(fields):
+    fields, data = read_pcd_points(path)
+    if not {"x", "y", "z", "index"} <= set(fields):
         raise ValueError(f"point cloud {path}: FIELDS must include x y z index, got {fields}")
-    with file_errors(path, "malformed point cloud data in"), warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*input contained no data")  # POINTS checks
-        data = np.loadtxt(path, skiprows=n_header, ndmin=2, dtype=np.float64, encoding="utf-8")
-    if data.size and data.shape[1] != len(fields):
-        raise ValueError(f"point cloud {path}: {data.shape[1]} columns, FIELDS has {len(fields)}")
-    points = header.get("POINTS") or [str(len(data))]
-    if not points[0].isdigit():
-        raise ValueError(f"point cloud {path}: POINTS must be a count, got {points}")
-    n_points = int(points[0])
-    if len(data) != n_points:
-        raise ValueError(f"point cloud {path}: header says {n_points} points, found {len(data)}")
     h, w = shape
     depth = np.zeros((h, w), dtype=np.float32)
     valid = np.zeros((h, w), dtype=bool)
@@ -396,39 +372,6 @@ def _scaled_K(K, sx: float, sy: float) -> np.ndarray:
     return K
 
 
-def read_camera_matrix(path) -> np.ndarray:
-    """The 3x3 ``K`` of a camera file (``pcdXXXXcamera.json``, :mod:`graspsim.datagen`).
-
-    Raises
-    ------
-    ValueError
-        Not JSON, no ``K``, or not a 3x3 matrix with positive focal lengths (naming the file).
-    """
-    import json
-
-    path = Path(path)
-    try:
-        K = json.loads(path.read_text())["K"]
-    except (ValueError, KeyError, TypeError) as e:
-        raise ValueError(f"camera file {path}: no readable 'K' ({e})") from e
-    return check_camera_matrix(K, f"camera file {path}: 'K'")
-
-
-def check_camera_matrix(K, what: str = "the camera matrix 'K'") -> np.ndarray:
-    """``K`` as a float (3, 3) array, or a ValueError naming ``what`` unless it is a 3x3
-    camera matrix of finite values with positive focal lengths. An object with a ``K``
-    attribute (camera intrinsics) stands for its matrix."""
-    K = getattr(K, "K", K)
-    try:
-        K = np.asarray(K, dtype=float)
-    except (ValueError, TypeError) as e:
-        raise ValueError(f"{what} must be a 3x3 camera matrix, got {K!r}"[:300]) from e
-    if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0:
-        raise ValueError(f"{what} must be a 3x3 camera matrix with positive focal lengths, "
-                         f"got {K.tolist()}")
-    return K
-
-
 # --------------------------------------------------------------------------------------------
 # Cornell
 
@@ -458,7 +401,10 @@ def load_cornell(
       (float32 metres from the common preprocessing; 0, negative or non-finite means missing);
     * ``pcdXXXXcpos.txt`` / ``pcdXXXXcneg.txt``: positive / negative rectangles (see
       :func:`read_cornell_rectangles`). An image without them loads with no rectangles (logged).
-    * optionally ``pcdXXXXcamera.json`` (graspsim datasets): the camera matrix, ``sample.K``.
+    * optionally ``pcdXXXXcamera.json`` (graspsim datasets, or the cache of a fit): the camera
+      matrix, ``sample.K``; without it, an image with its point cloud gets the matrix fitted
+      to the cloud (:func:`dlsr.intrinsics.cornell_camera_matrix`, cached beside it), one with
+      only the TIFF ``K=None``.
 
     Parameters
     ----------
@@ -544,8 +490,8 @@ def load_cornell(
             positives=rects["cpos"],
             negatives=rects["cneg"],
             source=rgb_path,
-            K=(read_camera_matrix(folder / f"{stem}camera.json")
-               if (folder / f"{stem}camera.json").is_file() else None),
+            K=(cornell_camera_matrix(rgb_path)[0]
+               if (folder / f"{stem}camera.json").is_file() or pcd.is_file() else None),
         )
         samples.append(resize_sample(sample, scale) if scale != 1.0 else sample)
     ids = [s.image_id for s in samples]
@@ -698,10 +644,11 @@ def load_jacquard(root, depth: str = "stereo", scale: float = 1.0) -> list[Grasp
 
     Each view is a set of files ``<view>_<hash>_{RGB.png, mask.png, perfect_depth.tiff,
     stereo_depth.tiff, grasps.txt}`` (1024x1024). The ``image_id`` is ``"<view>_<hash>"``, the
-    ``object_id`` the hash, ``mask`` the object mask (``mask.png > 0``), ``positives`` the grasps
-    and ``negatives`` empty (use :func:`sample_negatives`). Jacquard angles are clockwise as
-    displayed, so ``theta = -radians(theta_deg)``, ``w = opening``, ``h = jaw_size`` (found by
-    drawing the real sample views; see :func:`read_jacquard_grasps`).
+    ``object_id`` the hash, ``mask`` the object mask (``mask.png > 0``), ``positives`` the grasps,
+    ``negatives`` empty (use :func:`sample_negatives`) and ``K`` the estimated camera matrix
+    (:func:`dlsr.intrinsics.jacquard_camera_matrix`; Jacquard ships none). Jacquard angles
+    are clockwise as displayed, so ``theta = -radians(theta_deg)``, ``w = opening``,
+    ``h = jaw_size`` (found by drawing the real sample views; see :func:`read_jacquard_grasps`).
 
     Parameters
     ----------
@@ -752,6 +699,7 @@ def load_jacquard(root, depth: str = "stereo", scale: float = 1.0) -> list[Grasp
             positives=grasps,
             source=rgb_path,
             mask=mask,
+            K=jacquard_camera_matrix(shape),
         )
         samples.append(resize_sample(sample, scale) if scale != 1.0 else sample)
     return samples

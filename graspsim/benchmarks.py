@@ -195,7 +195,8 @@ def detection_benchmark(
     coarse_to_fine: bool = False, max_images: int | None = None, n_overlays: int = 4,
     save_model=None, extra_patches=None, extra_train=None, extra_format: str | None = None,
     extra_scale=None, extra_mapping=None, model=None, physical: bool = False, seed: int = 0,
-    progress: bool = True, executor=None,
+    progress: bool = True, executor=None, options=None, images=None,
+    train_positives: int | None = None,
 ) -> dict:
     """Cross-validated detection accuracy by the rectangle metric (the paper's Table 2).
 
@@ -239,6 +240,19 @@ def detection_benchmark(
     each baseline on the same images), ``table2.md`` and ``overlays/{best,worst}_*.png``
     (detection in red and blue, the labelled positives in yellow and grey).
 
+    ``options`` (a :class:`graspsim.detector_options.DetectorOptions`, the command's
+    ``--preset`` and detector flags) replaces ``detector``, ``physical`` and ``clear_jaws``:
+    its ``physical`` trains the folds' SVMs with physical features (with ``model``: keeps the
+    model's physical term), and each fold's detector is
+    :func:`graspsim.detector_options.build_real_detector` (the lattice or grid search, the
+    completed region, the clear-jaws grid and the gripper-aware check on the images' camera
+    matrices, :mod:`dlsr.intrinsics`).
+
+    ``images`` (a collection of image ids) keeps only those images of ``data`` (for the
+    inner folds of :func:`nested_detector_choice`). ``train_positives`` trains each fold on a
+    seeded random subset of at most that many positives per training image (a cheaper
+    training; the test images keep all theirs for the rectangle metric).
+
     Test images of a fold are detected through ``executor`` (a
     :class:`graspsim.executor.Executor`: local processes or a Ray cluster; sequential when
     None); results are written in image order as they arrive.
@@ -263,6 +277,9 @@ def detection_benchmark(
 
     from .detectors import MaskPCADetector
 
+    if options is not None:
+        detector, clear_jaws = options.detector, False
+        physical = options.physical and model is None
     if detector not in DETECTOR_KINDS:
         raise ValueError(f"detector must be one of {DETECTOR_KINDS}, got {detector!r}")
     if model is not None:
@@ -305,6 +322,13 @@ def detection_benchmark(
     out.mkdir(parents=True, exist_ok=True)
     samples = load_samples(data, format, scale, mapping)
     samples = [s for s in samples if s.positives]
+    if images is not None:
+        wanted = {str(i) for i in images}
+        missing = wanted - {s.image_id for s in samples}
+        if missing:
+            raise ValueError(f"images not among the labelled images of {data}: "
+                             f"{sorted(missing)[:5]}")
+        samples = [s for s in samples if s.image_id in wanted]
     if max_images is not None:
         samples = samples[:max_images]
     if model is not None:
@@ -349,6 +373,13 @@ def detection_benchmark(
         config["clear_jaws"] = True
     if physical:
         config["physical"] = True
+    if options is not None:
+        config["options"] = dataclasses.asdict(options)
+    if train_positives is not None:
+        config["train_positives"] = int(train_positives)
+    if images is not None:
+        config["images"] = hashlib.sha1(" ".join(sorted(str(i) for i in images))
+                                        .encode()).hexdigest()[:12]
     if hard_negatives:
         config["hard_negatives"] = int(hard_negatives)
         if hard_rounds != 1:
@@ -365,7 +396,8 @@ def detection_benchmark(
                                         "encoder_param", "C", "n_folds", "n_atoms",
                                         "n_patches", "grid_negatives", "fit_grid", "region",
                                         "n_images", "seed", "hard_negatives", "hard_rounds",
-                                        "extra_patches", "extra_train", "physical")
+                                        "extra_patches", "extra_train", "physical",
+                                        "images", "train_positives")
                  if k in config}
     train_key = hashlib.sha1(json.dumps(train_cfg, sort_keys=True).encode()).hexdigest()[:12]
     results_path = out / "results.jsonl"
@@ -391,14 +423,21 @@ def detection_benchmark(
             fold_model = DLSRDetector.load(mpath)
         else:
             fold_model = train_detector(
-                [samples[i] for i in train] + extra_samples, learner=learner, encoder=encoder,
+                _fewer_positives([samples[i] for i in train], train_positives, seed + k)
+                + extra_samples, learner=learner, encoder=encoder,
                 encoder_param=encoder_param, C=C, n_atoms=n_atoms, n_patches=n_patches,
                 grid_negatives=grid_negatives, fit_grid=fit_grid,
                 hard_negatives=hard_negatives, hard_rounds=hard_rounds, extra_patches=extra,
                 physical=physical, random_state=seed + k, region=region)
             fold_model.save(mpath)
-        det = _benchmark_detector(fold_model, detector, region, rescore, coarse_to_fine,
-                                  clear_jaws)
+        if options is not None:
+            from .detector_options import build_real_detector
+
+            det = build_real_detector(fold_model, options, region=region, rescore=rescore,
+                                      coarse_to_fine=coarse_to_fine)
+        else:
+            det = _benchmark_detector(fold_model, detector, region, rescore, coarse_to_fine,
+                                      clear_jaws)
         tasks = [(det, samples[i], baselines, seed + i, {"config_key": key, "fold": k})
                  for i in todo]
         for rec_ in ex.imap(_detect_one, tasks, desc=f"fold {k}", star=True):
@@ -468,6 +507,21 @@ def detection_benchmark(
         full.save(save_model)
         summary["model"] = str(save_model)
     return summary
+
+
+def _fewer_positives(samples, n: int | None, seed: int):
+    """``samples`` with at most ``n`` of their positives each (a seeded random subset, in
+    their order); ``samples`` itself when ``n`` is None."""
+    if n is None:
+        return samples
+    if n < 1:
+        raise ValueError(f"train_positives must be >= 1, got {n}")
+    rng = np.random.default_rng(seed)
+    out = []
+    for s in samples:
+        keep = np.sort(rng.choice(len(s.positives), min(n, len(s.positives)), replace=False))
+        out.append(dataclasses.replace(s, positives=[s.positives[i] for i in keep]))
+    return out
 
 
 def _benchmark_detector(model, kind: str, region: str, rescore: int, coarse_to_fine: bool,
@@ -574,6 +628,182 @@ def paired_detection_test(a: dict, b: dict) -> dict:
                          f"{len(sb)}, {len(set(sa) ^ set(sb))} not in both)")
     ids = sorted(sa)
     return mcnemar_exact([sa[i] for i in ids], [sb[i] for i in ids])
+
+
+def nested_detector_choice(data, format: str, out, candidates=None, n_folds: int = 5,
+                           inner_folds: int = 3, inner_views: int | None = 3,
+                           report=("paper", "all"), seed: int = 0, progress: bool = True,
+                           executor=None, **benchmark) -> dict:
+    """Choose the detector configuration by nested object-wise cross-validation.
+
+    For each outer object-wise fold (the folds of :func:`detection_benchmark` with the same
+    ``seed``), every candidate configuration is cross-validated on the outer training
+    objects alone (``inner_folds`` object-wise folds over their first ``inner_views`` views
+    each, sorted by image id; None: every view), and the one with the best inner accuracy is
+    chosen (ties: the earlier candidate, the paper's first); it is then reported on the outer
+    fold's images, never seen by the choice. The chosen configurations and those in ``report``
+    run on every outer fold (:func:`detection_benchmark`, ``out/outer``), so the table also
+    has each of them on all images, and the nested outcome is image by image the chosen
+    configuration's of its fold. The configurations in ``report`` run first, and the tables
+    are rewritten after every outer fold (partial until the last). Everything resumes from
+    ``out``.
+
+    Parameters
+    ----------
+    data, format :
+        As :func:`detection_benchmark`.
+    out : path-like
+        ``out/outer<k>/`` (inner runs of outer fold k), ``out/outer/``, ``out/nested.json``
+        and ``out/nested.md``.
+    candidates : dict of str to DetectorOptions or None
+        Default :func:`graspsim.detector_options.candidate_options` (the paper's, each
+        departure alone, all of them).
+    n_folds, inner_folds : int
+    inner_views : int or None
+        Views per object in the inner folds (fewer: a cheaper choice).
+    report : sequence of str
+        Candidates also run on every outer fold.
+    seed : int
+    progress : bool
+    executor : Executor or None
+    **benchmark :
+        Further options of :func:`detection_benchmark` (``scale``, ``n_atoms``, ``n_patches``,
+        ``rescore``, ``coarse_to_fine``, ...).
+
+    Returns
+    -------
+    dict
+        ``choices`` (per outer fold: the inner accuracy of every candidate and the choice),
+        ``chosen`` (the most often chosen; ties by mean inner accuracy), ``outer`` (per
+        reported configuration: accuracy, Wilson interval, per-image outcomes), ``nested``
+        (the same for the nested outcome), ``baselines`` and ``tests`` (exact McNemar tests
+        on the same images); also written to ``out/nested.json`` and ``out/nested.md``.
+    """
+    import json
+
+    from dlsr import datasets
+
+    from .detector_options import candidate_options
+
+    candidates = candidate_options() if candidates is None else dict(candidates)
+    unknown = [r for r in report if r not in candidates]
+    if unknown:
+        raise ValueError(f"report {unknown} not among the candidates {sorted(candidates)}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    samples = [s for s in load_samples(data, format, benchmark.get("scale"),
+                                       benchmark.get("mapping")) if s.positives]
+    folds = datasets.object_wise_folds(samples, n_folds, seed)
+    bench = dict(benchmark, progress=False, executor=executor, seed=seed)
+    runs = {}
+
+    def outer(name):  # a configuration on every outer fold (resumes)
+        if name not in runs:
+            runs[name] = detection_benchmark(data, format, out / "outer", split="object",
+                                             n_folds=n_folds, options=candidates[name],
+                                             **bench)
+        return runs[name]
+
+    for name in report:  # first, so that an interrupted choice still reports them
+        outer(name)
+    choices = []
+    for k, (train, _test) in enumerate(folds):
+        by_object: dict = {}
+        for i in sorted(train, key=lambda i: samples[i].image_id):
+            by_object.setdefault(samples[i].object_id, []).append(samples[i].image_id)
+        ids = [v for views in by_object.values() for v in views[:inner_views]]
+        accs = {}
+        for name, opts in candidates.items():
+            summary = detection_benchmark(data, format, out / f"outer{k}", split="object",
+                                          n_folds=inner_folds, options=opts, images=ids,
+                                          **bench)
+            accs[name] = summary["accuracy"]
+            if progress:
+                log.warning("outer fold %d: inner accuracy of %s %.3f", k, name, accs[name])
+        best = max(accs.values())
+        chosen = next(name for name in candidates if accs[name] == best)
+        choices.append({"fold": k, "n_inner_images": len(ids),
+                        "inner_objects": sorted(by_object), "inner_accuracy": accs,
+                        "chosen": chosen})
+        outer(chosen)
+        result = _nested_result(data, format, n_folds, inner_folds, inner_views, seed,
+                                candidates, benchmark, choices, runs, len(folds))
+        write_text_atomic(out / "nested.json", json.dumps(result, indent=2))
+        write_text_atomic(out / "nested.md", nested_markdown(result))
+    return result
+
+
+def _nested_result(data, format, n_folds, inner_folds, inner_views, seed, candidates,
+                   benchmark, choices, runs, n_outer) -> dict:
+    """The summary of :func:`nested_detector_choice` from the outer folds chosen so far (the
+    nested row covers their images only until every fold is done)."""
+    from collections import Counter
+
+    from .trials import wilson_interval
+
+    counts = Counter(c["chosen"] for c in choices)
+    mean_inner = {n: float(np.mean([c["inner_accuracy"][n] for c in choices]))
+                  for n in candidates}
+    chosen = max(counts, key=lambda n: (counts[n], mean_inner[n]))
+    first = next(iter(runs.values()))["per_image"]
+    ids = [r["image_id"] for r in first]
+    fold_of = {r["image_id"]: r["fold"] for r in first}
+    outcome = {name: {r["image_id"]: bool(r["success"]) for r in run["per_image"]}
+               for name, run in runs.items()}
+    baselines = {b: {r["image_id"]: bool(r["baselines"][b]) for r in first}
+                 for b in first[0]["baselines"]}
+    chosen_of = {c["fold"]: c["chosen"] for c in choices}
+    nested_ids = [i for i in ids if fold_of[i] in chosen_of]
+    rows = {"nested": {i: outcome[chosen_of[fold_of[i]]][i] for i in nested_ids},
+            **{f"config:{n}": outcome[n] for n in runs},
+            **{f"baseline:{b}": v for b, v in baselines.items()}}
+
+    def cell(res: dict) -> dict:
+        n, k_ = len(res), sum(res.values())
+        lo, hi = wilson_interval(k_, n)
+        return {"successes": k_, "n": n, "accuracy": k_ / n, "ci95": [lo, hi]}
+
+    table = {name: cell(res) for name, res in rows.items()}
+    tests = {}
+    for a in ["nested", *[f"config:{n}" for n in runs]]:
+        for b in ["baseline:mask-pca", "config:paper"]:
+            if a != b and b in rows:
+                same = [i for i in rows[a] if i in rows[b]]
+                tests[f"{a} vs {b}"] = mcnemar_exact([rows[a][i] for i in same],
+                                                     [rows[b][i] for i in same])
+    return {"config": {"data": str(data), "format": format, "n_folds": n_folds,
+                       "inner_folds": inner_folds, "inner_views": inner_views, "seed": seed,
+                       "candidates": {n: dataclasses.asdict(o) for n, o in candidates.items()},
+                       **{k: v for k, v in benchmark.items() if k != "executor"}},
+            "complete": len(choices) == n_outer, "outer_folds_done": len(choices),
+            "choices": choices, "chosen": chosen, "chosen_counts": dict(counts),
+            "mean_inner_accuracy": mean_inner, "table": table, "tests": tests,
+            "per_image": [{"image_id": i, "fold": fold_of[i],
+                           **{n: rows[n].get(i) for n in rows}} for i in ids]}
+
+
+def nested_markdown(result: dict) -> str:
+    """The tables of :func:`nested_detector_choice`: inner accuracies and choices per outer
+    fold, then outer accuracies with Wilson intervals and the paired tests."""
+    names = list(result["config"]["candidates"])
+    lines = ["| outer fold | inner images | " + " | ".join(names) + " | chosen |",
+             "|---" * (len(names) + 3) + "|"]
+    for c in result["choices"]:
+        lines.append(f"| {c['fold']} | {c['n_inner_images']} | " + " | ".join(
+            f"{100 * c['inner_accuracy'][n]:.1f}" for n in names) + f" | {c['chosen']} |")
+    done = ("" if result["complete"] else f" (partial: {result['outer_folds_done']} of "
+            f"{result['config']['n_folds']} outer folds; the nested row covers their images)")
+    lines += ["", f"Chosen overall: **{result['chosen']}** "
+              f"({result['chosen_counts']}){done}", "",
+              "| detector | success | accuracy | 95 % CI (Wilson) |", "|---|---|---|---|"]
+    for name, t in result["table"].items():
+        lo, hi = t["ci95"]
+        lines.append(f"| {name} | {t['successes']}/{t['n']} | {100 * t['accuracy']:.1f} % | "
+                     f"{100 * lo:.1f} to {100 * hi:.1f} % |")
+    lines += ["", "| paired test (exact McNemar) | a only | b only | p |", "|---|---|---|---|"]
+    for name, t in result["tests"].items():
+        lines.append(f"| {name} | {t['a_only']} | {t['b_only']} | {t['p_value']:.3g} |")
+    return "\n".join(lines) + "\n"
 
 
 def selftaught_benchmark(data, format: str, extra_patches, out,

@@ -329,7 +329,9 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
     ----------
     rects : sequence of GraspRectangle
     obs : mapping
-        The observation (``depth``, ``depth_valid``, ``K``, ``T_world_cam``).
+        The observation (``depth``, ``depth_valid``, ``K``, optionally ``T_world_cam``:
+        without it, a real image, the camera frame stands for the world's, the approach
+        along the optical axis as in :func:`graspsim.grasp.rectangle_to_grasp`).
     table_depth : ndarray of shape (H, W) or None
         The table's depth; fitted to ``obs["depth"]`` when None.
     tolerance : float
@@ -355,9 +357,11 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
 
     geo = hand_geometry(hand)
 
-    for key in ("depth", "K", "T_world_cam"):
+    for key in ("depth", "K"):
         if obs.get(key) is None:
             raise ValueError(f"judging rectangles executable needs the observation's {key!r}")
+    if obs.get("T_world_cam") is None:  # a real image: the check is in the camera's frame
+        obs = dict(obs, T_world_cam=np.eye(4))
     depth = np.asarray(obs["depth"], dtype=np.float32)
     valid = np.asarray(obs.get("depth_valid", depth > 0), dtype=bool) & (depth > 0)
     region = None
@@ -443,6 +447,28 @@ class GripperAwareDetector:
                         unseen_surface=self.unseen_surface, min_grip=self.min_grip,
                         hand=getattr(self, "hand", "builtin"))
         return [r for r, k in zip(rects, ok, strict=True) if k][: self.keep]
+
+    def detect(self, obs):
+        """The wrapped DLSR detector's :class:`dlsr.detection.Detection`, keeping the
+        rectangles :func:`executable` passes (the first ``keep``, with their scores); its
+        ``reason`` says so when none passes."""
+        import dataclasses
+        import time
+
+        t0 = time.perf_counter()
+        det = self.detector.detect(obs)
+        if not len(det.rects):
+            return det
+        from dlsr.rectangles import array_to_rects
+
+        ok = executable(array_to_rects(det.rects), obs, tolerance=self.tolerance,
+                        unseen_surface=self.unseen_surface, min_grip=self.min_grip)
+        keep = np.flatnonzero(ok)[: self.keep]
+        reason = None if len(keep) else (f"none of the {len(det.rects)} best rectangles is "
+                                         "executable by this gripper")
+        return dataclasses.replace(det, rects=det.rects[keep], scores=det.scores[keep],
+                                   seconds=det.seconds + time.perf_counter() - t0,
+                                   reason=reason)
 
     def __repr__(self):
         hand = getattr(self, "hand", "builtin")

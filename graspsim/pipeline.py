@@ -119,6 +119,12 @@ class RunConfig:
         configuration also runs in the trials, as ``dlsr-paper``: a model trained the paper's
         way on the same images (``model/dlsr-paper``, with ``physical``), the paper's grid
         search (``"dense"``).
+    complete_region, clear_jaws : bool
+        DLSR's trial detector: candidates on the object region with its unseen surface added
+        (the lattice's default), and, for the grid search without ``gripper_aware`` (which
+        implies it), only rectangles whose jaws come down beside the object. The names are
+        :mod:`graspsim.detector_options`' (shared with ``graspsim detect`` and ``graspsim
+        benchmark detection``); ``graspsim run --no-complete-region`` etc. override them.
     trials : int
         Simulated grasp trials per detector on the test objects.
     trial_candidates : int
@@ -159,6 +165,8 @@ class RunConfig:
     hard_rounds: int = 1
     grid_negatives: float = 0.0
     gripper_aware: bool = True
+    complete_region: bool = True
+    clear_jaws: bool = False
     trials: int = 100
     trial_candidates: int = 32
     baselines: list[str] = field(default_factory=lambda: ["mask-pca", "random", "oracle"])
@@ -560,12 +568,17 @@ def _trial_detector(name: str, model_path: Path, config: RunConfig, hand: str = 
         options = {}
         if kind == "dense":
             options = {"coarse_to_fine": config.coarse_to_fine, "rescore": config.rescore}
-        det = DLSRDetector.load(model_path).detector(kind, **options)
-        if name == "dlsr" and config.gripper_aware:
-            from .detectors import gripper_aware
+        model = DLSRDetector.load(model_path)
+        if name == "dlsr":
+            from .detector_options import DetectorOptions, build_real_detector
 
-            det = gripper_aware(det, hand=hand)
-        return det
+            opts = DetectorOptions(detector=kind, complete_region=config.complete_region,
+                                   physical=config.physical,
+                                   gripper_aware=config.gripper_aware,
+                                   clear_jaws=config.clear_jaws)
+            return build_real_detector(model, opts, rescore=config.rescore,
+                                       coarse_to_fine=config.coarse_to_fine, hand=hand)
+        return model.detector(kind, **options)
     from .detectors import load_detector
 
     return load_detector(name)

@@ -16,6 +16,7 @@ from ..rectangles import GraspRectangle, array_to_rects
 from .grid import (
     PAPER_GRID,
     SearchGrid,
+    complete_region,
     enumerate_candidates,
     object_region,
     valid_depth,
@@ -104,11 +105,13 @@ class _Base:
     def _candidates(self, obs, grid: SearchGrid | None = None):
         """``(candidates, reason or None, object region or None)``."""
         _check_obs(obs)
-        _, region, how, reason = _observed_region(obs, self.background, self.region,
-                                                  self.min_height)
+        valid, region, how, reason = _observed_region(obs, self.background, self.region,
+                                                      self.min_height)
         if reason:
             return np.zeros((0, 5)), reason, region
         grid = grid or self.grid
+        if self.grid.complete_region:
+            region = complete_region(region, valid)
         cand = enumerate_candidates(region, grid)
         cand = within_reach(obs, cand, region, grid)
         if len(cand) == 0:

@@ -17,7 +17,7 @@ from .model import DLSRDetector
 
 def detect_files(model, rgb, depth, mask=None, background=None, depth_units: float = 1.0,
                  detector: str | None = None, top_k: int = 5, out=None,
-                 clear_jaws: bool | None = None, K=None, **options):
+                 clear_jaws: bool | None = None, K=None, build=None, **options):
     """Detect grasps in one RGB-D image read from files (the ``graspsim detect`` command).
 
     Parameters
@@ -49,7 +49,13 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
     K : array-like of shape (3, 3), path or None
         The camera matrix, or a camera file (``pcdXXXXcamera.json``,
         :func:`dlsr.datasets.read_camera_matrix`): needed by a model trained with physical
-        features (``train_detector(physical=True)``, the default of ``graspsim run``).
+        features (``train_detector(physical=True)``, the default of ``graspsim run``). None:
+        for a Cornell image (``pcdXXXXr.png``) the matrix fitted to its point cloud, cached
+        or the Kinect estimate (:func:`dlsr.intrinsics.cornell_camera_matrix`), else none.
+    build : callable or None
+        ``build(model, top_k=, background=, obs=)`` returns the detector to run (e.g.
+        :func:`graspsim.detector_options.build_real_detector` with the command's options);
+        None: ``model.detector(detector, ...)`` with ``options`` and ``clear_jaws``.
     **options :
         Passed to the detector (``coarse_to_fine``, ``rescore``, ``region``).
 
@@ -75,6 +81,10 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
                              "20 m); millimetres need --depth-units 0.001")
     if mask is not None:
         obs["mask"] = read_gray(mask) > 0
+    if K is None and Path(rgb).name.startswith("pcd") and Path(rgb).name[3:7].isdigit():
+        from ..intrinsics import cornell_camera_matrix
+
+        K = cornell_camera_matrix(rgb)[0]
     if K is not None:
         from ..datasets import check_camera_matrix, read_camera_matrix
 
@@ -85,6 +95,10 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
                          "above the table): give the camera intrinsics (graspsim detect "
                          "--intrinsics FX FY CX CY, or --camera pcdXXXXcamera.json)")
     bg = None if background is None else read_rgb(background)
+    if build is not None:
+        det = build(model, top_k=top_k, background=bg, obs=obs).detect(obs)
+        _write_overlay(out, rgb_arr, det)
+        return det
     search = model.detector(detector, top_k=top_k, background=bg, **options)
     if clear_jaws is not None:
         if hasattr(search, "grid"):
@@ -93,13 +107,19 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
             raise ValueError("the lattice detector's candidates always span the object: "
                              "--no-clear-jaws needs the grid search (--detector dense)")
     det = search.detect(obs)
-    if out is not None:
-        from PIL import Image
-
-        from ..viz import draw_rectangles
-
-        img = draw_rectangles(rgb_arr, det.rects[:1], negatives=det.rects[1:][::-1])
-        kind = Image.registered_extensions().get(Path(out).suffix.lower(), "PNG")
-        with atomic_write(out, "wb") as fh:  # never a half-written overlay
-            Image.fromarray(img).save(fh, format=kind)
+    _write_overlay(out, rgb_arr, det)
     return det
+
+
+def _write_overlay(out, rgb_arr, det) -> None:
+    """The overlay PNG of :func:`detect_files` (best drawn last), when ``out`` is a path."""
+    if out is None:
+        return
+    from PIL import Image
+
+    from ..viz import draw_rectangles
+
+    img = draw_rectangles(rgb_arr, det.rects[:1], negatives=det.rects[1:][::-1])
+    kind = Image.registered_extensions().get(Path(out).suffix.lower(), "PNG")
+    with atomic_write(out, "wb") as fh:  # never a half-written overlay
+        Image.fromarray(img).save(fh, format=kind)

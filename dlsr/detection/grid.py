@@ -47,6 +47,10 @@ class SearchGrid:
         centre (``w z / f`` with the observation's camera matrix ``K``, :func:`opening_widths`),
         is at most this (a gripper's largest opening). Needs ``obs["K"]``; None (default, the
         paper) keeps every size.
+    complete_region : bool
+        Lay the candidates on the object region with its unseen surface added (the missing
+        depth inside its convex hull, :func:`complete_region`), as the lattice detector does
+        (``LatticeDetector(complete=True)``). Not in the paper (off by default).
     """
 
     angles_deg: tuple = tuple(range(0, 180, 15))
@@ -58,6 +62,7 @@ class SearchGrid:
     coverage_on: str = "dilated"
     clear_jaws: bool = False
     max_width: float | None = None
+    complete_region: bool = False
 
     def pairs(self) -> list[tuple[float, float]]:
         """``(w, h)`` pairs with ``w >= h``."""
@@ -74,6 +79,8 @@ class SearchGrid:
             "coverage_on": self.coverage_on,
             "clear_jaws": bool(self.clear_jaws),
             "max_width": None if self.max_width is None else float(self.max_width),
+            # added later: only when used, so earlier models' saved grids stay the same
+            **({"complete_region": True} if self.complete_region else {}),
         }
 
     @classmethod

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from graspsim.detector_options import add_detector_arguments
+
 from . import add_executor_args, executor_from_args
 
 
@@ -104,16 +106,11 @@ def _register_detection(sub) -> None:
                    "--recognition, else 1)")
     d.add_argument("--recognition", default=None, metavar="JSON",
                    help="recognition.json: take the most often chosen encoder parameter and C")
-    d.add_argument("--detector", choices=["dense", "exact", "lattice"], default="dense",
-                   help="dense / exact: the paper's grid search; lattice: rectangles fitted to "
-                        "the object region, every 15 deg (not in the paper)")
+    add_detector_arguments(d)
     d.add_argument("--coarse-to-fine", action="store_true",
                    help="dense detector: coarse grid first, then the full grid near the best")
     d.add_argument("--rescore", type=int, default=300,
                    help="dense detector: best candidates rescored exactly (0: none)")
-    d.add_argument("--clear-jaws", action="store_true",
-                   help="search only rectangles whose jaws come down beside the object region "
-                        "(not in the paper; detection only, the training is the same)")
     d.add_argument("--region", choices=["auto", "background", "mask", "depth"], default="auto",
                    help="object region: the sample mask when there is one, else depth above "
                         "the table plane")
@@ -131,10 +128,6 @@ def _register_detection(sub) -> None:
                         "default 0, as the paper)")
     d.add_argument("--hard-rounds", type=int, default=1, metavar="R",
                    help="rounds of hard-negative mining, each on the refitted model (default 1)")
-    d.add_argument("--physical", action="store_true",
-                   help="train the SVM with the rectangles' physical features too (opening in "
-                        "metres, heights above the table, place on the object's axes; needs "
-                        "camera matrices: graspsim datasets; not in the paper)")
     d.add_argument("--folds", type=int, default=5)
     d.add_argument("--atoms", type=int, default=300)
     d.add_argument("--patches", type=int, default=100_000)
@@ -150,6 +143,7 @@ def _register_detection(sub) -> None:
 
 def _detection(args: argparse.Namespace) -> int:
     from graspsim.benchmarks import detection_benchmark
+    from graspsim.detector_options import options_from_args
 
     param = args.encoder_param
     if param is not None and args.encoder in ("OMP", "mOMP"):
@@ -158,16 +152,16 @@ def _detection(args: argparse.Namespace) -> int:
         data=args.data, format=args.format, out=args.out, scale=args.scale,
         mapping=args.mapping, split=args.split, learner=args.learner, encoder=args.encoder,
         encoder_param=param, C=args.C, recognition_json=args.recognition,
-        detector=args.detector, n_folds=args.folds, n_atoms=args.atoms,
+        options=options_from_args(args), n_folds=args.folds, n_atoms=args.atoms,
         n_patches=args.patches, grid_negatives=args.grid_negatives,
         fit_grid=args.fit_grid, hard_negatives=args.hard_negatives,
         hard_rounds=args.hard_rounds, region=args.region,
-        rescore=args.rescore, clear_jaws=args.clear_jaws,
+        rescore=args.rescore,
         coarse_to_fine=args.coarse_to_fine, max_images=args.max_images,
         n_overlays=args.overlays, save_model=args.save_model,
         extra_patches=args.extra_patches, extra_train=args.extra_train,
         extra_format=args.extra_format, extra_scale=args.extra_scale,
-        extra_mapping=args.extra_mapping, model=args.model, physical=args.physical,
+        extra_mapping=args.extra_mapping, model=args.model,
         seed=args.seed,
         executor=executor_from_args(args),
     )

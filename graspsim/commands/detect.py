@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from graspsim.detector_options import add_detector_arguments
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -24,19 +26,16 @@ def register(subparsers) -> None:
     p.add_argument("--mask", default=None, help="object mask image (non-zero = object)")
     p.add_argument("--background", default=None,
                    help="background image: object region by background subtraction")
-    p.add_argument("--detector", choices=["dense", "exact", "lattice"], default=None,
-                   help="default: the model's saved choice")
+    add_detector_arguments(p)
     cam = p.add_mutually_exclusive_group()
     cam.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"),
                      default=None, help="camera intrinsics in pixels (needed by a model "
-                     "trained with physical features, the default of graspsim run)")
+                     "trained with physical features and by the gripper-aware check; found "
+                     "by itself for Cornell files pcdXXXXr.png: fitted to pcdXXXX.txt)")
     cam.add_argument("--camera", default=None, metavar="JSON",
                      help="camera file with the matrix K (graspsim datasets' "
                           "pcdXXXXcamera.json)")
     p.add_argument("--coarse-to-fine", action="store_true")
-    p.add_argument("--clear-jaws", action=argparse.BooleanOptionalAction, default=None,
-                   help="only rectangles whose jaws come down beside the object, centred on "
-                   "it (default: the model's saved grid; off in the paper's)")
     p.add_argument("--top-k", type=int, default=5)
     p.add_argument("--out", default=None, help="overlay PNG (best in red/blue, others in "
                    "yellow/grey)")
@@ -45,16 +44,25 @@ def register(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from dlsr.detection import detect_files
+    from graspsim.detector_options import build_real_detector, options_from_args
 
-    options = {"coarse_to_fine": True} if args.coarse_to_fine else {}
+    opts = options_from_args(args)
     K = args.camera
     if args.intrinsics is not None:
         fx, fy, cx, cy = args.intrinsics
         K = [[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]
+
+    def build(model, top_k, background, obs):
+        if opts.gripper_aware and obs.get("K") is None:
+            raise ValueError("the gripper-aware check needs the camera matrix: give "
+                             "--intrinsics FX FY CX CY or --camera FILE (found by itself only "
+                             "for Cornell files pcdXXXXr.png), or --no-gripper-aware")
+        return build_real_detector(model, opts, top_k=top_k, background=background,
+                                   coarse_to_fine=args.coarse_to_fine)
+
     det = detect_files(args.model, args.rgb, args.depth, mask=args.mask,
                        background=args.background, depth_units=args.depth_units,
-                       detector=args.detector, top_k=args.top_k, out=args.out,
-                       clear_jaws=args.clear_jaws, K=K, **options)
+                       top_k=args.top_k, out=args.out, K=K, build=build)
     print(json.dumps({
         "rectangles": [dict(zip(("x", "y", "theta", "w", "h"), map(float, r), strict=True))
                        for r in det.rects],

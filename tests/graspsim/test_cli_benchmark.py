@@ -77,7 +77,7 @@ def test_detection_benchmark_cli_passes_the_mining_options(tmp_path, box_samples
 
     monkeypatch.setattr(dlsr.detection, "train_detector", fake_train)
     base = ["benchmark", "detection", "--data", str(root), "--format", "cornell", "--split",
-            "image", "--hard-negatives", "5", "--out", str(tmp_path / "o")]
+            "image", "--hard-negatives", "5", "--out", str(tmp_path / "o"), "--preset", "paper"]
     with pytest.raises(Stop):
         main(base + ["--hard-rounds", "2"])
     with pytest.raises(Stop):
@@ -89,8 +89,10 @@ def test_detection_benchmark_cli_passes_the_mining_options(tmp_path, box_samples
 
 # --- detection: self-taught patches, extra training data, saved models, executors ----------
 
+# the paper's configuration (the real-data default needs camera matrices, which the box
+# samples do not have)
 TINY = ["--scale", "0.5", "--atoms", "8", "--patches", "1500", "--rescore", "0",
-        "--coarse-to-fine", "--overlays", "0"]
+        "--coarse-to-fine", "--overlays", "0", "--preset", "paper"]
 
 
 def _patch_file(path, n=600, seed=0):
@@ -206,7 +208,7 @@ def test_detection_with_a_saved_model_trains_nothing(tmp_path, box_samples, monk
     monkeypatch.setattr(dlsr.detection, "train_detector", no_training)
     args = ["benchmark", "detection", "--data", str(root), "--format", "cornell", "--model",
             str(tmp_path / "m"), "--scale", "0.5", "--rescore", "0", "--coarse-to-fine",
-            "--overlays", "1", "--out", str(tmp_path / "o")]
+            "--overlays", "1", "--out", str(tmp_path / "o"), "--preset", "paper"]
     assert main(args) == 0
     assert "saved model, no training" in capsys.readouterr().out
     summary = json.loads((tmp_path / "o" / "detection.json").read_text())
