@@ -644,7 +644,8 @@ def load_detector(name_or_path):
         up on ``sys.path``, then in the current folder); a name registered by an installed
         package in the entry-point group ``graspsim.detectors``; the path of a model saved by
         :meth:`dlsr.detection.DLSRDetector.save` (``.npz`` + ``.json``, with or without the
-        suffix), which detects with the options saved in the model.
+        suffix), which detects with the options saved in the model; the path of a GG-CNN
+        model (``MODEL.pt`` + ``MODEL.json``, :mod:`graspsim.ggcnn`).
 
     Returns
     -------
@@ -666,6 +667,14 @@ def load_detector(name_or_path):
         return _load_spec(key)
     det = _load_entry_point(key)
     if det is not None:
+        return det
+    from .ggcnn.model import is_ggcnn_model
+
+    if is_ggcnn_model(key):
+        from .ggcnn.detector import GGCNNDetector
+
+        det = GGCNNDetector(key)
+        det._loaded()  # one line naming a broken file, or how to install torch
         return det
     from dlsr.detection import DLSRDetector
 
@@ -700,6 +709,11 @@ def check_detector(name_or_path) -> None:
                              "class, a factory nor a detector with predict(obs)")
         return
     if key in plugin_names():
+        return
+    from .ggcnn.model import is_ggcnn_model, require_torch
+
+    if is_ggcnn_model(key):
+        require_torch()
         return
     from dlsr.detection import DLSRDetector
 
