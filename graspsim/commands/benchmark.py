@@ -104,9 +104,20 @@ def _register_detection(sub) -> None:
                    "--recognition, else 1)")
     d.add_argument("--recognition", default=None, metavar="JSON",
                    help="recognition.json: take the most often chosen encoder parameter and C")
-    d.add_argument("--detector", choices=["dense", "exact", "lattice"], default="dense",
+    d.add_argument("--detector", choices=["dense", "exact", "lattice", "ggcnn"],
+                   default="dense",
                    help="dense / exact: the paper's grid search; lattice: rectangles fitted to "
-                        "the object region, every 15 deg (not in the paper)")
+                        "the object region, every 15 deg (not in the paper); ggcnn: the GG-CNN "
+                        "peer trained per fold (needs the cnn extra; --paired runs DLSR on the "
+                        "same folds too)")
+    d.add_argument("--ggcnn-steps", type=int, default=20_000, metavar="N",
+                   help="GG-CNN: sample-steps of each fold's training")
+    d.add_argument("--ggcnn-device", default="cpu", help="GG-CNN: cpu or cuda")
+    d.add_argument("--ggcnn-input-size", type=int, default=300, metavar="S",
+                   help="GG-CNN: network input side (the 300 px crop is resized to it)")
+    d.add_argument("--paired", action="store_true",
+                   help="GG-CNN: also run DLSR's benchmark (default options) on the same "
+                        "folds into OUT/dlsr and test the two image by image (exact McNemar)")
     d.add_argument("--coarse-to-fine", action="store_true",
                    help="dense detector: coarse grid first, then the full grid near the best")
     d.add_argument("--rescore", type=int, default=300,
@@ -148,8 +159,30 @@ def _register_detection(sub) -> None:
     d.set_defaults(func=_detection)
 
 
+def _ggcnn(args: argparse.Namespace) -> int:
+    from graspsim.ggcnn.evaluate import ggcnn_detection_benchmark
+
+    s = ggcnn_detection_benchmark(
+        data=args.data, format=args.format, out=args.out, scale=args.scale,
+        mapping=args.mapping, split=args.split, n_folds=args.folds, seed=args.seed,
+        steps=args.ggcnn_steps, device=args.ggcnn_device, max_images=args.max_images,
+        paired=args.paired, input_size=args.ggcnn_input_size)
+    line = (f"wrote {args.out}/ggcnn.json and ggcnn.md: GG-CNN accuracy "
+            f"{100 * s['accuracy']:.2f} % ({s['successes']}/{s['n']}, {args.split}-wise)")
+    if "vs_dlsr" in s:
+        line += (f"; DLSR {100 * s['dlsr_accuracy']:.2f} % on the same images, exact McNemar "
+                 f"p = {s['vs_dlsr']['p_value']:.3g}")
+    print(line)
+    return 0
+
+
 def _detection(args: argparse.Namespace) -> int:
     from graspsim.benchmarks import detection_benchmark
+
+    if args.detector == "ggcnn":
+        return _ggcnn(args)
+    if args.paired:
+        raise ValueError("--paired is for --detector ggcnn")
 
     param = args.encoder_param
     if param is not None and args.encoder in ("OMP", "mOMP"):

@@ -16,7 +16,11 @@ from dlsr.rectangles import GraspRectangle
 torch = pytest.importorskip("torch")
 
 from graspsim.cli import main  # noqa: E402
-from graspsim.detectors import check_detector, load_detector  # noqa: E402
+from graspsim.detectors import (  # noqa: E402
+    GripperAwareDetector,
+    check_detector,
+    load_detector,
+)
 from graspsim.ggcnn.detector import GGCNNDetector, crop_input  # noqa: E402
 from graspsim.ggcnn.maps import grasp_maps  # noqa: E402
 from graspsim.ggcnn.model import (  # noqa: E402
@@ -119,6 +123,11 @@ def test_detector_returns_ranked_rectangles_in_image_pixels(trained):
     assert np.allclose(rects[:, 4], rects[:, 3] / 2)
     assert isinstance(load_detector(str(path)), GGCNNDetector)
     check_detector(str(path) + ".json")
+    aware = load_detector(str(path) + "+aware")  # as run configs list it
+    assert isinstance(aware, GripperAwareDetector) and aware.detector.top_k == 40
+    check_detector(str(path) + "+aware")
+    with pytest.raises(FileNotFoundError, match="unknown detector"):
+        check_detector(str(path) + "_missing+aware")
 
 
 def test_truncated_and_foreign_files_give_one_line_errors(tmp_path, trained):
@@ -207,3 +216,28 @@ def test_without_torch_one_line_and_other_commands_work(monkeypatch, trained, ca
     assert err.count("\n") == 0 and INSTALL_HINT in err
     assert main(["train", "ggcnn", "--data", str(path.parent), "--out", "x"]) == 2
     load_detector("mask-pca")  # the other detectors need no torch
+
+
+def test_offline_benchmark_uses_dlsrs_object_wise_folds(tmp_path, capsys):
+    from dlsr.datasets import object_wise_folds
+
+    data = write_cornell(tiny_samples(), tmp_path / "data")
+    out = tmp_path / "bench"
+    args = ["benchmark", "detection", "--data", str(data), "--format", "cornell",
+            "--detector", "ggcnn", "--folds", "2", "--ggcnn-steps", "8",
+            "--ggcnn-input-size", "48", "--out", str(out)]
+    assert main(args) == 0
+    assert "GG-CNN accuracy" in capsys.readouterr().out
+    s = json.loads((out / "ggcnn.json").read_text())
+    assert s["n"] == 4 and len(s["folds"]) == 2
+    from graspsim.benchmarks import load_samples
+
+    folds = object_wise_folds(load_samples(data, "cornell"), 2, 0)
+    by_fold = {r["image_id"]: r["fold"] for r in s["per_image"]}
+    samples = load_samples(data, "cornell")
+    for k, (_, test) in enumerate(folds):
+        assert {by_fold[samples[i].image_id] for i in test} == {k}
+    lines = (out / "ggcnn_results.jsonl").read_text().splitlines()
+    assert main(args) == 0  # a rerun resumes: nothing detected again
+    assert (out / "ggcnn_results.jsonl").read_text().splitlines() == lines
+    assert main([*args[:-2], "--paired", "--detector", "dense", "--out", str(out)]) == 2
