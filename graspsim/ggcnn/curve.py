@@ -237,7 +237,8 @@ def curve_figure(result: dict, path) -> None:
         y = np.array([p[1]["successes"] / p[1]["n"] for p in pts])
         lo = np.array([p[1]["ci95"][0] for p in pts])
         hi = np.array([p[1]["ci95"][1] for p in pts])
-        ax.errorbar(x, 100 * y, yerr=[100 * (y - lo), 100 * (hi - y)], marker="o", capsize=3,
+        err = 100 * np.clip([y - lo, hi - y], 0, None)
+        ax.errorbar(x, 100 * y, yerr=err, marker="o", capsize=3,
                     label=name)
     ax.set_xscale("log")
     ax.set_xlabel("training scenes (train objects)")

@@ -241,3 +241,34 @@ def test_offline_benchmark_uses_dlsrs_object_wise_folds(tmp_path, capsys):
     assert main(args) == 0  # a rerun resumes: nothing detected again
     assert (out / "ggcnn_results.jsonl").read_text().splitlines() == lines
     assert main([*args[:-2], "--paired", "--detector", "dense", "--out", str(out)]) == 2
+
+
+def test_run_configs_accept_ggcnn_raw_and_aware(trained, monkeypatch):
+    from graspsim.pipeline import RunConfig
+    from graspsim.runplan import trial_names
+
+    path, _ = trained
+    monkeypatch.chdir(path.parent)
+    cfg = RunConfig(baselines=["mask-pca", "model", "model+aware"]).validated()
+    assert trial_names(cfg)[-2:] == ["model", "model+aware"]
+    with pytest.raises(ValueError, match="baselines: unknown detector 'nomodel'"):
+        RunConfig(baselines=["nomodel+aware"]).validated()
+
+
+def test_curve_table_and_figure(tmp_path):
+    from graspsim.ggcnn.curve import curve_figure, curve_markdown
+
+    row = {"successes": 3, "n": 4, "ci95": [0.3, 0.95], "train_seconds": 12.0,
+           "planning_seconds": 0.5, "rect": {"correct": 2, "n": 5}}
+    result = {"config": {"budgets": [80, 160]},
+              "rows": {"10": {"dlsr": row, "ggcnn": {**row, "successes": 1, "budget": 80,
+                                                      "ci95": [0.05, 0.7]}}},
+              "validation": {"10": {"80": {"successes": 2, "n": 5}}},
+              "comparisons": {"10": {"dlsr vs ggcnn": {"counts": {"only_a": 2, "only_b": 0},
+                                                       "mcnemar_p": 0.5}}}}
+    md = curve_markdown(result)
+    assert "| 10 | dlsr | 3/4 | 30.0-95.0 % | 2/5 | 12 | 0.50 |  |" in md
+    assert "| 10 | ggcnn | 1/4 |" in md and "| 10 | dlsr vs ggcnn | 2 | 0 | 0.5 |" in md
+    assert "| 10 | 2/5 |  |" in md
+    curve_figure(result, tmp_path / "c.png")
+    assert (tmp_path / "c.png").stat().st_size > 1000
