@@ -272,3 +272,22 @@ def test_curve_table_and_figure(tmp_path):
     assert "| 10 | 2/5 |  |" in md
     curve_figure(result, tmp_path / "c.png")
     assert (tmp_path / "c.png").stat().st_size > 1000
+
+
+def test_perfect_maps_decode_to_the_labelled_rectangle_in_image_pixels(trained):
+    # The training labels (crop, resize) and the detector's way back are inverses: maps drawn
+    # from a positive in input pixels come back as that positive in image pixels.
+    path, _ = trained
+    s = tiny_samples(1)[0]
+    _, box = crop_input(s.depth, s.depth_valid, 60, 48, "centre")
+    row0, col0, scale = box
+    truth = s.positives[1]
+    r = np.array([[(truth.x - col0) * scale, (truth.y - row0) * scale, truth.theta,
+                   truth.w * scale, truth.h * scale]])
+    det = GGCNNDetector(path, top_k=1)
+    det.meta_ = {"sigma": 3.0}
+    det.maps = lambda obs: (grasp_maps(r, (48, 48)), box)
+    (got,), _ = det.predict({"depth": s.depth})
+    assert np.hypot(got[0] - truth.x, got[1] - truth.y) < 1.5
+    assert abs((got[2] - truth.theta + np.pi / 2) % np.pi - np.pi / 2) < 1e-6
+    assert got[3] == pytest.approx(truth.w, rel=1e-4)
