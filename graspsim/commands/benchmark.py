@@ -116,8 +116,9 @@ def _register_detection(sub) -> None:
     d.add_argument("--ggcnn-input-size", type=int, default=300, metavar="S",
                    help="GG-CNN: network input side (the 300 px crop is resized to it)")
     d.add_argument("--paired", action="store_true",
-                   help="GG-CNN: also run DLSR's benchmark (default options) on the same "
-                        "folds into OUT/dlsr and test the two image by image (exact McNemar)")
+                   help="GG-CNN: also run DLSR's benchmark (the dense detector with the DLSR "
+                        "options given here) on the same folds into OUT/dlsr and test the two "
+                        "image by image (exact McNemar)")
     d.add_argument("--coarse-to-fine", action="store_true",
                    help="dense detector: coarse grid first, then the full grid near the best")
     d.add_argument("--rescore", type=int, default=300,
@@ -166,7 +167,15 @@ def _ggcnn(args: argparse.Namespace) -> int:
         data=args.data, format=args.format, out=args.out, scale=args.scale,
         mapping=args.mapping, split=args.split, n_folds=args.folds, seed=args.seed,
         steps=args.ggcnn_steps, device=args.ggcnn_device, max_images=args.max_images,
-        paired=args.paired, input_size=args.ggcnn_input_size)
+        paired=args.paired, input_size=args.ggcnn_input_size,
+        dlsr_options=dict(  # DLSR's options on this command line (the dense grid search)
+            learner=args.learner, encoder=args.encoder, encoder_param=args.encoder_param,
+            C=args.C, recognition_json=args.recognition, n_atoms=args.atoms,
+            n_patches=args.patches, grid_negatives=args.grid_negatives,
+            fit_grid=args.fit_grid, hard_negatives=args.hard_negatives,
+            hard_rounds=args.hard_rounds, region=args.region, rescore=args.rescore,
+            clear_jaws=args.clear_jaws, coarse_to_fine=args.coarse_to_fine,
+            physical=args.physical, executor=executor_from_args(args)))
     line = (f"wrote {args.out}/ggcnn.json and ggcnn.md: GG-CNN accuracy "
             f"{100 * s['accuracy']:.2f} % ({s['successes']}/{s['n']}, {args.split}-wise)")
     if "vs_dlsr" in s:
