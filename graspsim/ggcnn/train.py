@@ -230,7 +230,7 @@ def train_ggcnn(samples, out, steps: int = 20_000, seed: int = 0, device: str = 
                     "sigma": 2.0, "width_scale": WIDTH_SCALE,
                     "training": {**options, "sample_steps": b * batch_size,
                                  "seconds": round(seconds, 2),
-                                 "loss": losses[-1] if losses else None,
+                                 "loss": losses[-1][1] if losses else None,
                                  "torch": torch.__version__}}
 
         net.train()
