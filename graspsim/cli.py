@@ -22,6 +22,7 @@ COMMANDS = [
     "detect",
     "benchmark",
     "trials",
+    "train",
     "dataset",
     "patches",
     "score",

@@ -38,6 +38,7 @@ __all__ = [
     "check_detections",
     "PluginDetector",
     "ENTRY_POINT_GROUP",
+    "AWARE_SUFFIX",
     "RandomDetector",
     "MaskPCADetector",
     "OracleDetector",
@@ -512,6 +513,7 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5, unseen_surface: bool
 
     from dlsr.detection import DenseDetector, ExactGridDetector, LatticeDetector
 
+    from .ggcnn.detector import GGCNNDetector
     from .hands import hand_geometry
 
     MAX_OPENING = hand_geometry(hand).max_opening  # noqa: N806
@@ -528,6 +530,9 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5, unseen_surface: bool
         detector.top_k = max(int(top_k), int(detector.top_k))
         if isinstance(detector, DenseDetector) and detector.rescore:
             detector.rescore = max(int(detector.rescore), detector.top_k)
+    elif isinstance(detector, GGCNNDetector):  # more of its quality peaks to choose from
+        detector = copy.copy(detector)
+        detector.top_k = max(int(top_k), int(detector.top_k))
     return GripperAwareDetector(detector, keep=keep, unseen_surface=unseen_surface,
                                 min_grip=min_grip, hand=hand)
 
@@ -680,18 +685,26 @@ def _load_entry_point(name: str) -> PluginDetector | None:
                           None if module is None else _module_folder(module))
 
 
+#: Appended to a detector's name: the same detector made gripper-aware (:func:`load_detector`).
+AWARE_SUFFIX = "+aware"
+
+
 def load_detector(name_or_path):
     """A detector from a built-in name, a plug-in, or a saved DLSR model.
 
     Parameters
     ----------
     name_or_path : str or Path
-        In this order: ``"random"``, ``"mask-pca"``, ``"oracle"``; ``"package.module:NAME"``
+        Any of the following with ``"+aware"`` appended is that detector made gripper-aware
+        (:func:`gripper_aware`, as ``graspsim trials --gripper-aware``), so that run configs
+        can list both. In this order: ``"random"``, ``"mask-pca"``, ``"oracle"``;
+        ``"package.module:NAME"``
         (a class or a no-argument factory, or an object with ``predict``; the module is looked
         up on ``sys.path``, then in the current folder); a name registered by an installed
         package in the entry-point group ``graspsim.detectors``; the path of a model saved by
         :meth:`dlsr.detection.DLSRDetector.save` (``.npz`` + ``.json``, with or without the
-        suffix), which detects with the options saved in the model.
+        suffix), which detects with the options saved in the model; the path of a GG-CNN
+        model (``MODEL.pt`` + ``MODEL.json``, :mod:`graspsim.ggcnn`).
 
     Returns
     -------
@@ -709,10 +722,20 @@ def load_detector(name_or_path):
     key = str(name_or_path)
     if key in DETECTORS:
         return DETECTORS[key]()
+    if key.endswith(AWARE_SUFFIX) and key != AWARE_SUFFIX:
+        return gripper_aware(load_detector(key[: -len(AWARE_SUFFIX)]))
     if _SPEC.match(key):
         return _load_spec(key)
     det = _load_entry_point(key)
     if det is not None:
+        return det
+    from .ggcnn.model import is_ggcnn_model
+
+    if is_ggcnn_model(key):
+        from .ggcnn.detector import GGCNNDetector
+
+        det = GGCNNDetector(key)
+        det._loaded()  # one line naming a broken file, or how to install torch
         return det
     from dlsr.detection import DLSRDetector
 
@@ -737,6 +760,9 @@ def check_detector(name_or_path) -> None:
     key = str(name_or_path)
     if key in DETECTORS:
         return
+    if key.endswith(AWARE_SUFFIX) and key != AWARE_SUFFIX:
+        check_detector(key[: -len(AWARE_SUFFIX)])
+        return
     if _SPEC.match(key):
         obj, _ = _resolve_spec(key)
         if isinstance(obj, type) and not callable(getattr(obj, "predict", None)):
@@ -747,6 +773,11 @@ def check_detector(name_or_path) -> None:
                              "class, a factory nor a detector with predict(obs)")
         return
     if key in plugin_names():
+        return
+    from .ggcnn.model import is_ggcnn_model, require_torch
+
+    if is_ggcnn_model(key):
+        require_torch()
         return
     from dlsr.detection import DLSRDetector
 

@@ -106,7 +106,17 @@ def _register_detection(sub) -> None:
                    "--recognition, else 1)")
     d.add_argument("--recognition", default=None, metavar="JSON",
                    help="recognition.json: take the most often chosen encoder parameter and C")
-    add_detector_arguments(d)
+    add_detector_arguments(d, kinds=("dense", "exact", "lattice", "ggcnn"))
+    d.add_argument("--ggcnn-steps", type=int, default=20_000, metavar="N",
+                   help="--detector ggcnn (the GG-CNN peer trained per fold; needs the cnn "
+                        "extra): sample-steps of each fold's training")
+    d.add_argument("--ggcnn-device", default="cpu", help="GG-CNN: cpu or cuda")
+    d.add_argument("--ggcnn-input-size", type=int, default=300, metavar="S",
+                   help="GG-CNN: network input side (the 300 px crop is resized to it)")
+    d.add_argument("--paired", action="store_true",
+                   help="GG-CNN: also run DLSR's benchmark (the DLSR options given here, the "
+                        "preset's detector) on the same folds into OUT/dlsr and test the two "
+                        "image by image (exact McNemar)")
     d.add_argument("--coarse-to-fine", action="store_true",
                    help="dense detector: coarse grid first, then the full grid near the best")
     d.add_argument("--rescore", type=int, default=300,
@@ -141,9 +151,42 @@ def _register_detection(sub) -> None:
     d.set_defaults(func=_detection)
 
 
+def _ggcnn(args: argparse.Namespace) -> int:
+    from graspsim.detector_options import options_from_args
+    from graspsim.ggcnn.evaluate import ggcnn_detection_benchmark
+
+    s = ggcnn_detection_benchmark(
+        data=args.data, format=args.format, out=args.out, scale=args.scale,
+        mapping=args.mapping, split=args.split, n_folds=args.folds, seed=args.seed,
+        steps=args.ggcnn_steps, device=args.ggcnn_device, max_images=args.max_images,
+        paired=args.paired, input_size=args.ggcnn_input_size,
+        dlsr_options=dict(  # DLSR's options on this command line (the dense grid search)
+            learner=args.learner, encoder=args.encoder, encoder_param=args.encoder_param,
+            C=args.C, recognition_json=args.recognition, n_atoms=args.atoms,
+            n_patches=args.patches, grid_negatives=args.grid_negatives,
+            fit_grid=args.fit_grid, hard_negatives=args.hard_negatives,
+            hard_rounds=args.hard_rounds, region=args.region, rescore=args.rescore,
+            coarse_to_fine=args.coarse_to_fine,
+            # the preset's DLSR detector, with the DLSR flags given here
+            options=options_from_args(argparse.Namespace(**{**vars(args), "detector": None})),
+            executor=executor_from_args(args)))
+    line = (f"wrote {args.out}/ggcnn.json and ggcnn.md: GG-CNN accuracy "
+            f"{100 * s['accuracy']:.2f} % ({s['successes']}/{s['n']}, {args.split}-wise)")
+    if "vs_dlsr" in s:
+        line += (f"; DLSR {100 * s['dlsr_accuracy']:.2f} % on the same images, exact McNemar "
+                 f"p = {s['vs_dlsr']['p_value']:.3g}")
+    print(line)
+    return 0
+
+
 def _detection(args: argparse.Namespace) -> int:
     from graspsim.benchmarks import detection_benchmark
     from graspsim.detector_options import options_from_args
+
+    if args.detector == "ggcnn":
+        return _ggcnn(args)
+    if args.paired:
+        raise ValueError("--paired is for --detector ggcnn")
 
     param = args.encoder_param
     if param is not None and args.encoder in ("OMP", "mOMP"):

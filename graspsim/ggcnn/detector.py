@@ -1,0 +1,158 @@
+"""The GG-CNN grasp detector of the harness: a saved model's maps read as ranked rectangles.
+
+:class:`GGCNNDetector` follows the :class:`graspsim.detectors.GraspDetector` protocol, so it
+runs wherever a detector does (``graspsim trials --detector MODEL``, ``graspsim run``
+baselines, :func:`graspsim.detectors.gripper_aware`).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from .maps import WIDTH_SCALE, crop_box, decode_maps, prepare_depth
+from .model import load_model
+
+__all__ = ["GGCNNDetector", "crop_input", "plugin", "MODEL_ENV"]
+
+#: Environment variable naming the model the ``ggcnn`` plug-in name loads.
+MODEL_ENV = "GRASPSIM_GGCNN_MODEL"
+
+
+def crop_input(depth, valid, crop: int, input_size: int, method: str = "object"):
+    """The network's input of one depth image and where it came from.
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W)
+        Metres, 0 where missing.
+    valid : ndarray of shape (H, W) or None
+    crop : int
+        Side of the square crop, pixels of the image (:func:`graspsim.ggcnn.maps.crop_box`).
+    input_size : int
+        Side of the network's input; the crop is resized to it.
+    method : {"object", "centre"}
+        Where the crop is centred (from the observation alone).
+
+    Returns
+    -------
+    x : ndarray of shape (input_size, input_size), float32
+        Preprocessed depth (:func:`graspsim.ggcnn.maps.prepare_depth`).
+    box : (row0, col0, scale)
+        Crop corner in the image and ``input_size / side``: an input pixel ``(c, r)`` is the
+        image pixel ``(col0 + c / scale, row0 + r / scale)``.
+    """
+    import cv2
+
+    depth = np.asarray(depth, dtype=np.float32)
+    if depth.ndim != 2:
+        raise ValueError(f"depth must be a 2-D image (H, W), got shape {depth.shape}")
+    if valid is not None and np.shape(valid) != depth.shape:
+        raise ValueError(f"depth_valid has shape {np.shape(valid)}, depth {depth.shape}")
+    row0, col0, side = crop_box(depth, valid, crop, method)
+    d = depth[row0:row0 + side, col0:col0 + side]
+    v = None if valid is None else np.asarray(valid, dtype=bool)[row0:row0 + side,
+                                                                 col0:col0 + side]
+    x = prepare_depth(d, v)
+    if side != input_size:
+        x = cv2.resize(x, (input_size, input_size), interpolation=cv2.INTER_AREA
+                       if side > input_size else cv2.INTER_LINEAR)
+    return x.astype(np.float32), (row0, col0, input_size / side)
+
+
+class GGCNNDetector:
+    """GG-CNN (Morrison et al., RSS 2018) trained by :func:`graspsim.ggcnn.train.train_ggcnn`.
+
+    Each call crops the depth image around the object found from depth (or the centre),
+    preprocesses it, runs the network and returns the ``top_k`` highest peaks of the filtered
+    quality map as rectangles (opening from the width map, jaw size half the opening), with
+    the filtered quality as scores.
+
+    Parameters
+    ----------
+    model : str or Path
+        ``MODEL`` of ``MODEL.pt`` + ``MODEL.json``.
+    device : str
+        ``"cpu"`` or ``"cuda"``.
+    top_k : int
+        Rectangles returned at most (several, so a gripper-aware filter can choose).
+    sigma : float or None
+        Gaussian filter of the maps, pixels of the input (None: the model's, default 2).
+    min_distance : int
+        Peaks this many input pixels apart at least.
+    threads : int or None
+        torch threads for inference (None: leave torch's setting).
+    """
+
+    requires_labels = False
+
+    def __init__(self, model, device: str = "cpu", top_k: int = 5, sigma: float | None = None,
+                 min_distance: int = 10, threads: int | None = None):
+        self.model = model
+        self.device = device
+        self.top_k = top_k
+        self.sigma = sigma
+        self.min_distance = min_distance
+        self.threads = threads
+
+    def _loaded(self):
+        if getattr(self, "net_", None) is None:
+            self.net_, self.meta_ = load_model(self.model, self.device)
+        return self.net_, self.meta_
+
+    def maps(self, obs):
+        """The network's maps of one observation and the crop they cover.
+
+        Returns
+        -------
+        maps : ndarray of shape (4, S, S), float32
+            Q, cos 2 phi, sin 2 phi, width (input pixels).
+        box : (row0, col0, scale)
+            As :func:`crop_input`.
+        """
+        from .model import require_torch
+
+        torch = require_torch()
+        net, meta = self._loaded()
+        x, box = crop_input(obs["depth"], obs.get("depth_valid"), int(meta["crop"]),
+                            int(meta["input_size"]), meta.get("crop_method", "object"))
+        if self.threads is not None:
+            torch.set_num_threads(int(self.threads))
+        with torch.no_grad():
+            t = torch.from_numpy(x)[None, None].to(self.device)
+            out = net(t)[0].cpu().numpy()
+        return out, box
+
+    def predict(self, obs):
+        """Rectangles (``(n, 5)``, image pixels) best first and their filtered quality."""
+        t0 = time.perf_counter()
+        out, (row0, col0, scale) = self.maps(obs)
+        sigma = self.sigma if self.sigma is not None else self.meta_.get("sigma", 2.0)
+        rects, scores = decode_maps(out, n=self.top_k, sigma=sigma,
+                                    width_scale=self.meta_.get("width_scale", WIDTH_SCALE),
+                                    min_distance=self.min_distance)
+        rects[:, 0] = col0 + rects[:, 0] / scale
+        rects[:, 1] = row0 + rects[:, 1] / scale
+        rects[:, 3:] /= scale
+        self.last_seconds_ = time.perf_counter() - t0
+        return rects, scores
+
+    def __getstate__(self):  # the network is loaded again in a worker, not pickled
+        return {k: v for k, v in self.__dict__.items() if k not in ("net_", "meta_")}
+
+    def __repr__(self):
+        return f"GGCNNDetector({str(self.model)!r}, device={self.device!r}, top_k={self.top_k})"
+
+
+def plugin() -> GGCNNDetector:
+    """The ``ggcnn`` entry point (group ``graspsim.detectors``): the model named by the
+    environment variable :data:`MODEL_ENV` (a saved model's path works directly too)."""
+    path = os.environ.get(MODEL_ENV)
+    if not path:
+        raise ValueError(f"the ggcnn detector needs a trained model: pass its path "
+                         f"(--detector MODEL, from `graspsim train ggcnn`) or set {MODEL_ENV}")
+    det = GGCNNDetector(path)
+    det._loaded()  # names a missing or broken file now
+    return det

@@ -1,0 +1,208 @@
+"""The GG-CNN network and its files (``MODEL.pt`` weights + ``MODEL.json``).
+
+PyTorch is imported only inside functions (:func:`require_torch`), so the rest of the toolkit
+works without it. The network follows Morrison, Corke and Leitner (RSS 2018): depth only,
+three strided convolutions (9x9/3, 5x5/2, 3x3/2 with 32, 16, 8 filters), three transposed
+convolutions back (3x3/2, 5x5/2, 9x9/3 with 8, 16, 32 filters), ReLU on the hidden layers and
+four linear 2x2 heads (quality, cos 2 phi, sin 2 phi, width): 62,420 parameters. The input
+side must be a multiple of 12 (300 in the paper).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+from dlsr.records import read_json, write_text_atomic
+
+__all__ = [
+    "INSTALL_HINT",
+    "FILTERS",
+    "FORMAT",
+    "require_torch",
+    "build_network",
+    "n_parameters",
+    "model_paths",
+    "is_ggcnn_model",
+    "save_model",
+    "load_model",
+]
+
+INSTALL_HINT = "GG-CNN needs PyTorch: install it with `pip install -e .[cnn]`"
+#: Filters of the three convolutions and the three transposed convolutions (the paper's).
+FILTERS = (32, 16, 8, 8, 16, 32)
+#: The ``format`` field of ``MODEL.json``.
+FORMAT = "ggcnn"
+FORMAT_VERSION = 1
+
+
+def require_torch():
+    """``torch``, or a one-line ``ValueError`` saying how to install it.
+
+    Returns
+    -------
+    module
+    """
+    try:
+        import torch
+    except ImportError:
+        raise ValueError(INSTALL_HINT) from None
+    return torch
+
+
+def build_network(filters=FILTERS):
+    """A freshly initialised GG-CNN (``torch.nn.Module``) mapping (B, 1, S, S) depth to
+    (B, 4, S, S) maps (Q, cos 2 phi, sin 2 phi, width), S a multiple of 12.
+
+    Parameters
+    ----------
+    filters : sequence of 6 int
+        Filters of the six hidden layers (:data:`FILTERS`; smaller ones for tests).
+
+    Returns
+    -------
+    torch.nn.Module
+        Initialised from torch's global generator: seed it (``torch.manual_seed``) first.
+    """
+    torch = require_torch()
+    nn = torch.nn
+    f = [int(v) for v in filters]
+    if len(f) != 6 or min(f) < 1:
+        raise ValueError(f"filters must be 6 positive counts, got {filters!r}")
+
+    class GGCNN(nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.body = nn.Sequential(
+                nn.Conv2d(1, f[0], 9, stride=3, padding=3), nn.ReLU(),
+                nn.Conv2d(f[0], f[1], 5, stride=2, padding=2), nn.ReLU(),
+                nn.Conv2d(f[1], f[2], 3, stride=2, padding=1), nn.ReLU(),
+                nn.ConvTranspose2d(f[2], f[3], 3, stride=2, padding=1, output_padding=1),
+                nn.ReLU(),
+                nn.ConvTranspose2d(f[3], f[4], 5, stride=2, padding=2, output_padding=1),
+                nn.ReLU(),
+                nn.ConvTranspose2d(f[4], f[5], 9, stride=3, padding=3, output_padding=1),
+                nn.ReLU(),
+            )
+            # four heads of one 2x2 filter each, linear output (S + 1 -> S)
+            self.heads = nn.ModuleList(nn.Conv2d(f[5], 1, 2) for _ in range(4))
+
+        def forward(self, x):
+            h = self.body(x)
+            return torch.cat([head(h) for head in self.heads], dim=1)
+
+    return GGCNN()
+
+
+def n_parameters(net) -> int:
+    """Trainable parameters of a network."""
+    return int(sum(p.numel() for p in net.parameters() if p.requires_grad))
+
+
+def model_paths(path) -> tuple[Path, Path]:
+    """``(MODEL.pt, MODEL.json)`` of ``path`` given with or without either suffix."""
+    p = Path(path)
+    if p.suffix in (".pt", ".json"):
+        p = p.with_suffix("")
+    return p.with_name(p.name + ".pt"), p.with_name(p.name + ".json")
+
+
+def is_ggcnn_model(path) -> bool:
+    """Whether ``path`` names a saved GG-CNN model (its JSON says ``"format": "ggcnn"``);
+    reads no weights and needs no torch."""
+    _, js = model_paths(path)
+    if not js.is_file():
+        return False
+    try:
+        with js.open() as fh:
+            head = json.load(fh)
+    except (OSError, ValueError):
+        return False
+    return isinstance(head, dict) and head.get("format") == FORMAT
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def save_model(net, path, meta: dict) -> tuple[Path, Path]:
+    """Write the weights (a state dict, ``MODEL.pt``) and ``MODEL.json`` (``meta`` plus the
+    format, the architecture and the sha256 of the weights file). No pickled objects.
+
+    Parameters
+    ----------
+    net : torch.nn.Module
+        From :func:`build_network`.
+    path : str or Path
+        ``MODEL`` (suffixes optional).
+    meta : dict
+        JSON-serialisable: ``filters``, ``input_size`` and the read-out options are required
+        by :func:`load_model`; training information may be added.
+
+    Returns
+    -------
+    (Path, Path)
+        The two files written.
+    """
+    torch = require_torch()
+    pt, js = model_paths(path)
+    pt.parent.mkdir(parents=True, exist_ok=True)
+    tmp = pt.with_name(pt.name + ".tmp")
+    state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
+    torch.save(state, tmp)
+    tmp.replace(pt)
+    record = {"format": FORMAT, "version": FORMAT_VERSION, **meta,
+              "weights": pt.name, "sha256": _sha256(pt)}
+    write_text_atomic(js, json.dumps(record, indent=2))
+    return pt, js
+
+
+def load_model(path, device: str = "cpu"):
+    """A saved GG-CNN: the network (eval mode, on ``device``) and its JSON record.
+
+    Raises
+    ------
+    FileNotFoundError
+        When a file is missing.
+    ValueError
+        One line naming the file: not a GG-CNN model, weights not matching the recorded
+        sha256 (truncated or replaced), or weights that do not fit the architecture.
+    """
+    pt, js = model_paths(path)
+    if not js.is_file():
+        raise FileNotFoundError(f"GG-CNN model file not found: {js}")
+    meta = read_json(js, "GG-CNN model")
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise ValueError(f"{js}: not a GG-CNN model (no \"format\": \"{FORMAT}\")")
+    if meta.get("version") != FORMAT_VERSION:
+        raise ValueError(f"{js}: GG-CNN model version {meta.get('version')!r}, this toolkit "
+                         f"reads {FORMAT_VERSION}")
+    for key in ("filters", "input_size", "sha256"):
+        if key not in meta:
+            raise ValueError(f"{js}: GG-CNN model record has no {key!r}")
+    if not pt.is_file():
+        raise FileNotFoundError(f"GG-CNN weights file not found: {pt}")
+    if _sha256(pt) != meta["sha256"]:
+        raise ValueError(f"{pt}: the weights do not match the sha256 recorded in {js.name} "
+                         "(truncated or replaced file)")
+    torch = require_torch()
+    try:
+        state = torch.load(pt, map_location=device, weights_only=True)
+    except Exception as exc:  # a foreign or corrupt file: one line
+        msg = " ".join(str(exc).split())[:200]
+        raise ValueError(f"{pt}: not a readable weights file ({type(exc).__name__}: "
+                         f"{msg})") from None
+    net = build_network(meta["filters"])
+    try:
+        net.load_state_dict(state)
+    except Exception as exc:
+        msg = " ".join(str(exc).split())[:200]
+        raise ValueError(f"{pt}: the weights do not fit GG-CNN with filters "
+                         f"{meta['filters']} ({msg})") from None
+    net.to(device).eval()
+    return net, meta

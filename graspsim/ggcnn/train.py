@@ -1,0 +1,282 @@
+"""Training GG-CNN: the paper's recipe (sum of four MSE losses, Adam, lr 1e-3, batch 8, random
+rotation and zoom), counted in sample-steps, resumable from checkpoints, reproducible.
+
+Same data, seed, options and device give the same weights: the weights are initialised from
+``torch.manual_seed(seed)`` (inside :func:`torch.random.fork_rng`, so the caller's torch
+generator is untouched), every batch and augmentation is drawn from
+``numpy.random.default_rng([seed, batch])`` (so a resumed run draws what an uninterrupted one
+would), and deterministic algorithms run on a fixed number of threads.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import time
+
+import numpy as np
+
+from dlsr.records import read_json, write_text_atomic
+from dlsr.rectangles import normalize_angle, rects_to_array
+
+from .detector import crop_input
+from .maps import WIDTH_SCALE, grasp_maps
+from .model import FILTERS, build_network, model_paths, require_torch, save_model
+
+log = logging.getLogger(__name__)
+
+__all__ = ["prepare_samples", "augment", "train_ggcnn", "train_from_folder"]
+
+
+def prepare_samples(samples, crop: int = 300, input_size: int = 300,
+                    crop_method: str = "object"):
+    """Network inputs and positive rectangles (input pixels) of labelled images.
+
+    The crop is chosen from the observation alone (:func:`graspsim.ggcnn.detector.crop_input`),
+    as at test time. Images without positives or without any valid depth are skipped with a
+    logged line naming them.
+
+    Parameters
+    ----------
+    samples : sequence of dlsr.datasets.GraspSample
+    crop, input_size : int
+        Crop side (image pixels) and network input side.
+    crop_method : {"object", "centre"}
+
+    Returns
+    -------
+    X : ndarray of shape (n, input_size, input_size), float32
+    rects : list of ndarray of shape (m_i, 5)
+        Positives in input pixels.
+    ids : list of str
+
+    Raises
+    ------
+    ValueError
+        When no image is left (none has positives, or none has valid depth).
+    """
+    X, R, ids = [], [], []
+    for s in samples:
+        if not s.positives:
+            log.info("GG-CNN training: skipped %s (no positive rectangle)", s.image_id)
+            continue
+        try:
+            x, (row0, col0, scale) = crop_input(s.depth, s.depth_valid, crop, input_size,
+                                                crop_method)
+        except ValueError as exc:
+            log.info("GG-CNN training: skipped %s (%s)", s.image_id, exc)
+            continue
+        r = rects_to_array(s.positives).copy()
+        r[:, 0] = (r[:, 0] - col0) * scale
+        r[:, 1] = (r[:, 1] - row0) * scale
+        r[:, 3:] *= scale
+        X.append(x)
+        R.append(r)
+        ids.append(str(s.image_id))
+    if not X:
+        raise ValueError(f"no image to train GG-CNN on: none of the {len(samples)} images has "
+                         "both a positive rectangle and valid depth")
+    return np.stack(X), R, ids
+
+
+def augment(x, rects, rng, rotate: bool = True, zoom=(1.0, 2.0)):
+    """One random rotation (about the centre, any angle) and zoom of an input and its rectangles.
+
+    Parameters
+    ----------
+    x : ndarray of shape (S, S), float32
+    rects : ndarray of shape (m, 5)
+    rng : numpy.random.Generator
+    rotate : bool
+    zoom : (float, float) or None
+        Range of the magnification (1: none; 2 shows the central half).
+
+    Returns
+    -------
+    x2 : ndarray of shape (S, S), float32
+    rects2 : ndarray of shape (m, 5)
+        Rectangles moved with the image (angles stay counter-clockwise as displayed).
+    """
+    import cv2
+
+    S = x.shape[0]
+    angle = rng.uniform(-180.0, 180.0) if rotate else 0.0
+    z = rng.uniform(*zoom) if zoom is not None else 1.0
+    c = (S - 1) / 2.0
+    M = cv2.getRotationMatrix2D((c, c), angle, z)  # counter-clockwise as displayed
+    x2 = cv2.warpAffine(x, M, (S, S), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    r = np.array(rects, dtype=np.float64).reshape(-1, 5)
+    xy = np.c_[r[:, :2], np.ones(len(r))] @ M.T
+    out = np.c_[xy, normalize_angle(r[:, 2] + np.deg2rad(angle)), r[:, 3] * z, r[:, 4] * z]
+    return x2.astype(np.float32), out
+
+
+def _fingerprint(ids, rects) -> str:
+    h = hashlib.sha256()
+    for i, r in zip(ids, rects, strict=True):
+        h.update(i.encode())
+        h.update(np.round(r, 3).tobytes())
+    return h.hexdigest()[:16]
+
+
+def _batch(X, R, rng, batch_size, input_size, do_augment):
+    idx = rng.integers(len(X), size=batch_size)
+    xs, ys = [], []
+    for i in idx:
+        x, r = (augment(X[i], R[i], rng) if do_augment else (X[i], R[i]))
+        xs.append(x)
+        ys.append(grasp_maps(r, (input_size, input_size)))
+    return np.stack(xs)[:, None], np.stack(ys)
+
+
+def train_ggcnn(samples, out, steps: int = 20_000, seed: int = 0, device: str = "cpu",
+                batch_size: int = 8, lr: float = 1e-3, crop: int = 300, input_size: int = 300,
+                crop_method: str = "object", filters=FILTERS, do_augment: bool = True,
+                checkpoint_every: int = 1000, snapshots=(), threads: int = 2,
+                progress: bool = True) -> dict:
+    """Train GG-CNN on labelled images and save it as ``out`` (``.pt`` + ``.json``).
+
+    Parameters
+    ----------
+    samples : sequence of dlsr.datasets.GraspSample
+        Training images; every positive rectangle is a label (:func:`grasp_maps`).
+    out : str or Path
+        ``MODEL``; the checkpoint is ``MODEL.ckpt.pt`` (+ ``.ckpt.json``) and a rerun with the
+        same data and options resumes from it.
+    steps : int
+        Sample-steps (images seen, in whole batches), whatever the dataset size.
+    seed : int
+    device : str
+        ``"cpu"`` or ``"cuda"``.
+    batch_size, lr : int, float
+        Adam's batch and learning rate (8 and 1e-3 as the paper).
+    crop, input_size : int
+        Crop side in image pixels and network input side (a multiple of 12; 300 as the paper).
+    crop_method : {"object", "centre"}
+    filters : sequence of 6 int
+        Layer widths (:data:`graspsim.ggcnn.model.FILTERS`).
+    do_augment : bool
+        Random rotation and zoom of every training image.
+    checkpoint_every : int
+        Sample-steps between checkpoints.
+    snapshots : sequence of int
+        Sample-steps at which the model is also saved as ``MODEL_stepN`` (for choosing the
+        budget on validation scenes).
+    threads : int
+        torch threads during training.
+    progress : bool
+        A progress bar with the loss.
+
+    Returns
+    -------
+    dict
+        The model's JSON record (``training``: sample-steps, seconds, the loss curve as
+        ``[sample-steps, mean loss since the previous checkpoint]`` pairs, ...).
+    """
+    torch = require_torch()
+    from tqdm.auto import tqdm
+
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1, got {steps}")
+    if input_size < 12 or input_size % 12:
+        raise ValueError(f"input_size must be a positive multiple of 12, got {input_size}")
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError("device 'cuda' asked for, but torch sees no CUDA device")
+    X, R, ids = prepare_samples(samples, crop, input_size, crop_method)
+    n_batches = -(-int(steps) // batch_size)
+    options = {"seed": int(seed), "device": device, "batch_size": int(batch_size),
+               "lr": float(lr), "crop": int(crop), "input_size": int(input_size),
+               "crop_method": crop_method, "filters": [int(f) for f in filters],
+               "augment": bool(do_augment), "data": _fingerprint(ids, R), "n_images": len(X)}
+    pt, js = model_paths(out)
+    ck_pt = pt.with_name(pt.stem + ".ckpt.pt")
+    ck_js = pt.with_name(pt.stem + ".ckpt.json")
+    pt.parent.mkdir(parents=True, exist_ok=True)
+    det_before = torch.are_deterministic_algorithms_enabled()
+    threads_before = torch.get_num_threads()
+    torch.use_deterministic_algorithms(True)
+    torch.set_num_threads(int(threads))
+    try:
+        with torch.random.fork_rng(devices=[] if device == "cpu" else None):
+            torch.manual_seed(int(seed))
+            net = build_network(filters).to(device)
+        opt = torch.optim.Adam(net.parameters(), lr=lr)
+        done, seconds, losses = 0, 0.0, []
+        if ck_js.is_file() and ck_pt.is_file():
+            info = read_json(ck_js, "GG-CNN checkpoint")
+            if info.get("options") == options and info.get("batches", 0) <= n_batches:
+                state = torch.load(ck_pt, map_location=device, weights_only=True)
+                net.load_state_dict(state["model"])
+                opt.load_state_dict(state["optim"])
+                done, seconds = int(info["batches"]), float(info["seconds"])
+                losses = list(info.get("losses", []))
+                log.info("GG-CNN: resumed from %s at %d sample-steps", ck_pt, done * batch_size)
+            else:
+                log.info("GG-CNN: checkpoint %s is of other data or options: starting afresh",
+                         ck_pt)
+        snaps = sorted({-(-int(s) // batch_size) for s in snapshots if 0 < s <= steps})
+
+        def checkpoint(b):
+            tmp = ck_pt.with_name(ck_pt.name + ".tmp")
+            torch.save({"model": net.state_dict(), "optim": opt.state_dict()}, tmp)
+            tmp.replace(ck_pt)
+            write_text_atomic(ck_js, json.dumps({"options": options, "batches": b,
+                                                 "seconds": seconds, "losses": losses}))
+
+        def record(b):
+            return {"crop": int(crop), "input_size": int(input_size),
+                    "crop_method": crop_method, "filters": [int(f) for f in filters],
+                    "sigma": 2.0, "width_scale": WIDTH_SCALE,
+                    "training": {**options, "sample_steps": b * batch_size,
+                                 "seconds": round(seconds, 2),
+                                 "loss": losses[-1][1] if losses else None,
+                                 "torch": torch.__version__}}
+
+        net.train()
+        every = max(1, int(checkpoint_every) // batch_size)
+        bar = tqdm(total=n_batches * batch_size, initial=done * batch_size, desc="GG-CNN",
+                   unit="sample", disable=not progress)
+        running, window = None, []
+        for b in range(done, n_batches):
+            t0 = time.perf_counter()
+            rng = np.random.default_rng([int(seed), b])
+            xb, yb = _batch(X, R, rng, batch_size, input_size, do_augment)
+            xt = torch.from_numpy(xb).to(device)
+            yt = torch.from_numpy(yb).to(device)
+            pred = net(xt)
+            loss = sum(torch.nn.functional.mse_loss(pred[:, k], yt[:, k]) for k in range(4))
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            window.append(float(loss.detach()))
+            running = float(np.mean(window[-every:]))
+            seconds += time.perf_counter() - t0
+            if (b + 1) % every == 0 or b + 1 == n_batches:
+                losses.append([(b + 1) * batch_size, round(float(np.mean(window)), 6)])
+                window = []
+                checkpoint(b + 1)
+            if b + 1 in snaps:
+                save_model(net, pt.with_name(f"{pt.stem}_step{(b + 1) * batch_size}"),
+                           record(b + 1))
+            bar.set_postfix(loss=f"{running:.4f}")
+            bar.update(batch_size)
+        bar.close()
+        meta = record(n_batches)
+        meta["training"]["loss_curve"] = losses
+        net.eval()
+        save_model(net, out, meta)
+    finally:
+        torch.use_deterministic_algorithms(det_before)
+        torch.set_num_threads(threads_before)
+    return read_json(js, "GG-CNN model")
+
+
+def train_from_folder(data, format: str, out, scale=None, mapping=None, **options) -> dict:
+    """:func:`train_ggcnn` on a dataset folder: a ``graspsim dataset`` folder or a Cornell
+    copy (``format="cornell"``), or a Jacquard copy (``"jacquard"``), read by
+    :func:`graspsim.benchmarks.load_samples` (the readers DLSR uses)."""
+    from graspsim.benchmarks import load_samples
+
+    samples = load_samples(data, format, scale, mapping)
+    return train_ggcnn(samples, out, **options)
