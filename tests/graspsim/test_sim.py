@@ -271,6 +271,6 @@ def test_a_scene_that_cannot_be_made_is_named(sim, box_spec, monkeypatch):
     def fail(*args, **kwargs):
         raise ValueError("could not make a scene: 21 re-draws")
 
-    monkeypatch.setattr(trials_mod, "make_scene", fail)
+    monkeypatch.setattr(trials_mod, "make_scene_of", fail)
     with pytest.raises(ValueError, match=r"^scene 4 of seed 9: could not make a scene"):
         trials_mod.observe_scene(sim, [box_spec], 9, 4)
