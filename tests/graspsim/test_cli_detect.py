@@ -156,10 +156,9 @@ def _small_cornell_grid():
     return dataclasses.replace(PAPER_GRID, clear_jaws=True).to_dict()
 
 
-@pytest.fixture(scope="module")
-def jacquard_model(jacquard_root, tmp_path_factory):
-    """A small model trained on 14 of the 28 real Jacquard views at half size (40 grasps each,
-    perfect depth), 50 atoms: about 25 s on 2 cores."""
+def _jacquard_training_views(jacquard_root):
+    """14 of the 28 real Jacquard views at half size with perfect depth, 40 positives each
+    (fewer where a view has fewer), the same for every model trained on them."""
     from dlsr.datasets import load_jacquard
 
     rng = np.random.default_rng(0)
@@ -168,6 +167,14 @@ def jacquard_model(jacquard_root, tmp_path_factory):
     views = [dataclasses.replace(v, positives=[v.positives[i] for i in np.sort(
         rng.choice(len(v.positives), min(40, len(v.positives)), replace=False))])
         for v in views]
+    return views
+
+
+@pytest.fixture(scope="module")
+def jacquard_model(jacquard_root, tmp_path_factory):
+    """A small model trained on 14 of the 28 real Jacquard views at half size (40 grasps each,
+    perfect depth), 50 atoms: about 25 s on 2 cores."""
+    views = _jacquard_training_views(jacquard_root)
     model = train_detector(views, n_atoms=50, n_patches=10_000, random_state=0,
                            grid=_small_cornell_grid())
     path = tmp_path_factory.mktemp("jacquard_model") / "m"
@@ -214,14 +221,7 @@ def jacquard_default_model(jacquard_root, tmp_path_factory):
     """A small model trained on 14 of the 28 real Jacquard views as the real-data default
     trains (physical features, on the estimated Jacquard camera matrix), the paper's grid
     otherwise: about 30 to 90 s on 2 shared cores."""
-    from dlsr.datasets import load_jacquard
-
-    rng = np.random.default_rng(0)
-    views = load_jacquard(jacquard_root, depth="perfect", scale=0.5)
-    views = [views[i] for i in np.sort(rng.choice(len(views), 14, replace=False))]
-    views = [dataclasses.replace(v, positives=[v.positives[i] for i in np.sort(
-        rng.choice(len(v.positives), min(40, len(v.positives)), replace=False))])
-        for v in views]
+    views = _jacquard_training_views(jacquard_root)
     model = train_detector(views, n_atoms=50, n_patches=10_000, random_state=0, physical=True)
     path = tmp_path_factory.mktemp("jacquard_default_model") / "m"
     model.save(path)
