@@ -36,6 +36,14 @@ folders (``config.json`` with ``dataset_fingerprint``, ``scores.jsonl`` records 
 ``image`` with ``success``) pair when the fingerprints agree. Anything else is refused with a
 one-line ``ValueError`` naming both folders and what differs.
 
+Clutter-round folders (``graspsim trials --declutter``: ``config.json`` and ``rounds.jsonl``
+records keyed by ``index`` with ``objects``, ``attempts`` and ``removed``) pair as trial folders
+do (round ``i`` starts from the same scene in both). Later grasps of a round see what the
+earlier ones left, so only the **first grasp** of each round is a paired outcome: it is the
+``success`` compared above. Beside it, a sign test on the objects each round removed: the rounds
+where A removed more against those where B did (ties dropped), the same exact binomial test
+(``removed``).
+
 Object-wise validation folders (``objectwise.json``, written by
 :func:`graspsim.pipeline.objectwise_validation`) hold one run per object fold; two of them
 pair when their folds hold the same objects and each fold's DLSR trial folders pair as above.
@@ -77,6 +85,8 @@ __all__ = [
     "compare_pair",
     "compare_folders",
     "comparison_text",
+    "first_grasp",
+    "removed_sign_test",
 ]
 
 #: The summary file that marks an object-wise validation folder.
@@ -270,14 +280,17 @@ def load_folder(folder) -> dict:
     Parameters
     ----------
     folder : str or Path
-        A ``graspsim trials`` folder (``config.json``, ``trials.jsonl``), a ``graspsim score``
-        folder (``config.json`` with ``dataset_fingerprint``, ``scores.jsonl``) or a finished
-        object-wise validation (``objectwise.json``; its DLSR trials).
+        A ``graspsim trials`` folder (``config.json``, ``trials.jsonl``), a clutter-round
+        folder (``config.json``, ``rounds.jsonl``; each round's first grasp is its
+        ``success``), a ``graspsim score`` folder (``config.json`` with
+        ``dataset_fingerprint``, ``scores.jsonl``) or a finished object-wise validation
+        (``objectwise.json``; its DLSR trials).
 
     Returns
     -------
     dict
-        ``folder`` (Path), ``kind`` (``"trials"``, ``"scores"`` or ``"objectwise"``),
+        ``folder`` (Path), ``kind`` (``"trials"``, ``"rounds"``, ``"scores"`` or
+        ``"objectwise"``),
         ``config`` (dict), ``name`` (the detector recorded in the configuration, else the
         folder's name; the configuration's name for an object-wise validation), ``file`` (the
         JSONL path, or ``objectwise.json``) and ``records`` (dict: trial index (int), image id
@@ -300,12 +313,16 @@ def load_folder(folder) -> dict:
     config = read_json(cfg_path, "configuration")
     if "dataset_fingerprint" in config:
         kind, jsonl, key = "scores", folder / "scores.jsonl", "image"
+    elif (folder / "rounds.jsonl").exists():
+        kind, jsonl, key = "rounds", folder / "rounds.jsonl", "index"
     else:
         kind, jsonl, key = "trials", folder / "trials.jsonl", "index"
     if not jsonl.exists():
         raise FileNotFoundError(f"{jsonl} is missing: {folder} holds no {kind}")
     records: dict = {}
     for number, rec in enumerate(read_jsonl(jsonl), start=1):
+        if kind == "rounds":
+            rec = _first_grasp(rec, jsonl, number)
         if key not in rec or "success" not in rec:
             raise ValueError(f"{jsonl}: record {number} has no '{key}' or no 'success'")
         if rec["success"] not in (True, False, 0, 1):
@@ -325,6 +342,48 @@ def load_folder(folder) -> dict:
     name = str(config.get("detector") or config.get("name") or folder.name)
     return {"folder": folder, "kind": kind, "config": config, "name": name, "file": jsonl,
             "records": records}
+
+
+def removed_sign_test(removed_a, removed_b) -> dict:
+    """Sign test on the objects two detectors removed in the same clutter rounds.
+
+    Parameters
+    ----------
+    removed_a, removed_b : sequence of int, shape (n_rounds,)
+        Objects each round removed, round by round.
+
+    Returns
+    -------
+    dict
+        ``a``, ``b`` (totals), ``more`` / ``fewer`` / ``same`` (rounds where A removed more,
+        fewer, as many) and ``sign_test_p`` (the exact two-sided binomial test of ``more``
+        against ``fewer``, ties dropped: :func:`mcnemar_exact`).
+    """
+    ra, rb = [int(x) for x in removed_a], [int(x) for x in removed_b]
+    if len(ra) != len(rb):
+        raise ValueError(f"removed counts of {len(ra)} and {len(rb)} rounds do not pair")
+    more = sum(x > y for x, y in zip(ra, rb, strict=True))
+    fewer = sum(x < y for x, y in zip(ra, rb, strict=True))
+    return {"a": sum(ra), "b": sum(rb), "more": more, "fewer": fewer,
+            "same": len(ra) - more - fewer, "sign_test_p": mcnemar_exact(more, fewer)}
+
+
+def first_grasp(record: dict) -> bool:
+    """Whether a clutter round's first grasp lifted an object (False when nothing was
+    proposed): the paired outcome of two detectors' rounds."""
+    attempts = record.get("attempts") or []
+    return bool(attempts and attempts[0].get("success"))
+
+
+def _first_grasp(rec, jsonl: Path, number: int) -> dict:
+    """A clutter round's record with its first grasp's outcome as ``success`` (False when
+    nothing was proposed) and its objects as ``object``."""
+    attempts, removed = rec.get("attempts"), rec.get("removed")
+    if not isinstance(attempts, list) or isinstance(removed, bool) \
+            or not isinstance(removed, int):
+        raise ValueError(f"{jsonl}: round record {number} has no 'attempts' list or no "
+                         "'removed' count")
+    return {**rec, "success": first_grasp(rec), "object": rec.get("objects")}
 
 
 def pooled_fold_trials(folder, n_folds: int, detector: str = "dlsr") -> tuple[list, dict]:
@@ -427,7 +486,7 @@ def _pair(a: dict, b: dict, names, alpha: float) -> dict:
                          + "; ".join(diff))
     ka, kb = set(a["records"]), set(b["records"])
     keys = sorted(ka & kb)
-    unit = "images" if a["kind"] == "scores" else "trials"
+    unit = {"scores": "images", "rounds": "rounds (first grasps)"}.get(a["kind"], "trials")
     if not keys:
         raise ValueError(f"{a['folder']} and {b['folder']} share no {unit}")
     unpaired = {"a": len(ka - kb), "b": len(kb - ka)}
@@ -447,6 +506,9 @@ def _pair(a: dict, b: dict, names, alpha: float) -> dict:
                      "success_rate": k / res["n"],
                      "success_ci95": list(wilson_interval(k, res["n"]))}
     extra = {}
+    if a["kind"] == "rounds":
+        extra["removed"] = removed_sign_test([a["records"][k]["removed"] for k in keys],
+                                             [b["records"][k]["removed"] for k in keys])
     if a["kind"] != "scores":
         g = [k for k in keys if a["records"][k].get("graspable") is True]
         if 0 < len(g) < len(keys):
@@ -456,7 +518,7 @@ def _pair(a: dict, b: dict, names, alpha: float) -> dict:
             extra["graspable"] = {k: r[k] for k in ("n", "counts", "success_a", "success_b",
                                                     "difference", "difference_ci",
                                                     "mcnemar_p", "better")}
-    if a["kind"] == "trials":
+    if a["kind"] in ("trials", "rounds"):
         from .execution import describe_changes
 
         ea, eb = _execution_changes(a), _execution_changes(b)
@@ -547,11 +609,20 @@ def comparison_text(c: dict) -> str:
         f"[{100 * lo:+.1f}, {100 * hi:+.1f}] (Newcombe 1998, method 10)",
         f"  exact McNemar p = {c['mcnemar_p']:.3g}",
         f"  {c['verdict']}",
+        *_removed_lines(c, na, nb),
         *_graspable_lines(c, na, nb, level),
         *([f"  execution parameters differ ({na}: {describe_changes(c['execution']['a'])}; "
            f"{nb}: {describe_changes(c['execution']['b'])}): the difference mixes detector and "
            "harness"] if c.get("execution") else []),
     ])
+
+
+def _removed_lines(c: dict, na: str, nb: str) -> list[str]:
+    r = c.get("removed")
+    if not r:
+        return []
+    return [f"  objects removed: {na} {r['a']}, {nb} {r['b']}; {na} removed more in "
+            f"{r['more']} rounds, fewer in {r['fewer']} (sign test p = {r['sign_test_p']:.3g})"]
 
 
 def _graspable_lines(c: dict, na: str, nb: str, level: str) -> list[str]:

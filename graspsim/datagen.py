@@ -144,10 +144,12 @@ def _camera_record(frame) -> dict:
 
 
 def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects: int = 1,
-                 sampler: str = "mixed", profile=None):
+                 sampler: str = "mixed", profile=None, scene: str = "drop", params=None):
     """One labelled scene (``sampler``: the candidates' mode, see
     :func:`graspsim.labelling.sample_candidates`; ``profile``: how the scene is seen, see
-    :mod:`graspsim.profiles`).
+    :mod:`graspsim.profiles`; ``scene``: how the objects are put on the table, see
+    :mod:`graspsim.scenes`; ``params``: the :class:`graspsim.execution.ExecutionParams`,
+    hand included, the candidates are executed with, None for the defaults).
 
     Returns
     -------
@@ -160,18 +162,22 @@ def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects
     """
     from dlsr.datasets import GraspSample
 
+    from .execution import ExecutionParams
     from .trials import _worker_sim, observe_scene
 
+    params = ExecutionParams() if params is None else params
     sim = _worker_sim()
-    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects, profile)
+    placed, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects, profile,
+                                              scene)
     cands = sample_candidates(frame.segmentation, bodies.objects, st["label"], n_candidates,
                               depth=frame.depth_clean, mode=sampler,
-                              intrinsics=frame.intrinsics)
-    labelled = label_rectangles(sim, scene, frame, snap_rectangles(cands))
+                              intrinsics=frame.intrinsics,
+                              max_opening=params.gripper.geometry.max_opening)
+    labelled = label_rectangles(sim, placed, frame, snap_rectangles(cands), params)
     mask = np.isin(frame.segmentation, bodies.objects)
     sample = GraspSample(
         image_id=f"{index:04d}",
-        object_id="+".join(o.spec.name for o in scene.objects),
+        object_id="+".join(o.spec.name for o in placed.objects),
         rgb=frame.rgb,
         depth=np.where(frame.depth_valid, frame.depth, 0).astype(np.float32),
         depth_valid=frame.depth_valid.astype(bool),
@@ -185,16 +191,17 @@ def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects
     entry = {
         "image": sample.image_id, "index": int(index), "seed": int(seed),
         "objects": [{"name": o.spec.name, "position": [float(v) for v in o.position],
-                     "orientation": [float(v) for v in o.orientation]} for o in scene.objects],
-        "table": {"z": float(scene.table_z), "rgba": [float(v) for v in scene.table_rgba]},
+                     "orientation": [float(v) for v in o.orientation]} for o in placed.objects],
+        "table": {"z": float(placed.table_z), "rgba": [float(v) for v in placed.table_rgba]},
         "camera": _camera_record(frame),
-        "redraws": list(scene.redraws),
+        "redraws": list(placed.redraws),
     }
     return sample, reasons, entry
 
 
-def _scene_task(specs, seed, index, n_candidates, n_objects, sampler, profile):
-    return scene_sample(specs, seed, index, n_candidates, n_objects, sampler, profile)
+def _scene_task(specs, seed, index, n_candidates, n_objects, sampler, profile, scene, params):
+    return scene_sample(specs, seed, index, n_candidates, n_objects, sampler, profile, scene,
+                        params)
 
 
 def _sha256(path) -> str:
@@ -204,7 +211,7 @@ def _sha256(path) -> str:
 def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: int = 0,
                  n_candidates: int = 48, n_objects: int = 1, n_jobs: int = 1,
                  progress: bool = False, executor=None, sampler: str = "mixed",
-                 profile=None) -> dict:
+                 profile=None, scene: str = "drop", params=None) -> dict:
     """Write a synthetic, physics-labelled Cornell dataset; resumes an interrupted run.
 
     Each scene is written as soon as it is labelled and recorded in ``scenes.jsonl``; a rerun
@@ -243,6 +250,17 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         objects and their poses do not depend on it. Any other than the default is recorded
         with its settings in ``dataset_config.json`` and ``scenes.json``
         (``generator.profile``).
+    scene : {"drop", "isolated", "packed", "pile"}
+        How the objects are put on the table (:mod:`graspsim.scenes`); ``"drop"``, the default,
+        drops them one by one at random poses. Packed and pile scenes need ``n_objects`` > 1
+        (VGN and GIGA use 5). Any other than the default is recorded
+        (``generator.scene``).
+    params : graspsim.execution.ExecutionParams or None
+        The harness and hand the candidates are executed with (None: the defaults, the
+        built-in hand; ``ExecutionParams(gripper=hand_params("franka"))`` for the Franka
+        hand). Recorded in ``scenes.json`` (``execution``), so :mod:`graspsim.scoring` executes
+        predictions with the same hand; any other than the defaults also in
+        ``dataset_config.json``.
 
     Returns
     -------
@@ -260,10 +278,16 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     if n_scenes < 1:
         raise ValueError(f"n_scenes must be >= 1, got {n_scenes}")
     from .profiles import get_profile
+    from .scenes import check_scene
 
     check_sampler(sampler)
+    check_scene(scene, n_objects)
+    if params is not None and not isinstance(params, ExecutionParams):
+        raise TypeError(f"params must be an ExecutionParams or None, got "
+                        f"{type(params).__name__}")
+    params = ExecutionParams() if params is None else params
     prof = get_profile(profile)
-    specs = resolve_objects(objects)
+    specs = resolve_objects(objects, params)
     root = Path(out)
     root.mkdir(parents=True, exist_ok=True)
     meta = {"format": MANIFEST_FORMAT, **object_set_meta(objects, specs),
@@ -272,6 +296,10 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         meta["sampler"] = sampler
     if prof != get_profile(None):  # likewise datasets of the default profile
         meta["profile"] = prof.to_dict()
+    if scene != "drop":  # ... and of the default scene and hand
+        meta["scene"] = scene
+    if params != ExecutionParams():
+        meta["execution"] = asdict(params)
     meta_path = root / "dataset_config.json"
     old = read_json(meta_path, "dataset configuration") if meta_path.exists() else None
     if old is not None:
@@ -290,7 +318,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
                  n_scenes)
     t0 = time.perf_counter()
     ex = _executor(executor, n_jobs, progress)
-    tasks = [(specs, seed, i, n_candidates, n_objects, sampler, prof) for i in todo]
+    tasks = [(specs, seed, i, n_candidates, n_objects, sampler, prof, scene, params)
+             for i in todo]
     with log_path.open("a") as fh:
         for i, (sample, rs, entry) in zip(
                 todo, ex.imap(_scene_task, tasks, desc="scenes", star=True), strict=True):
@@ -319,9 +348,10 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
                                               "n_objects")},
                       "sampler": sampler,
                       **({"profile": meta["profile"]} if "profile" in meta else {}),
+                      **({"scene": scene} if scene != "drop" else {}),
                       "scene_streams": "numpy SeedSequence(seed, spawn_key=(index,)), "
                                        "graspsim.trials.trial_streams"},
-        "execution": asdict(ExecutionParams()),
+        "execution": asdict(params),
         "grasp_depth": "observed",
         "rectangle_grid": dict(RECTANGLE_GRID),
         "object_specs": {s.name: _spec_record(s) for s in specs if s.name in used},
@@ -350,13 +380,13 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     return stats
 
 
-def _patch_scene(specs, seed, index, rects_per_scene, n_objects):
+def _patch_scene(specs, seed, index, rects_per_scene, n_objects, scene="drop"):
     from dlsr.preprocess import rectangle_images
 
     from .trials import _worker_sim, observe_scene
 
     sim = _worker_sim()
-    scene, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects)
+    _, bodies, frame, st = observe_scene(sim, specs, seed, index, n_objects, None, scene)
     rects = sample_candidates(frame.segmentation, bodies.objects, st["label"], rects_per_scene,
                               depth=frame.depth_clean)
     if not rects:
@@ -367,7 +397,8 @@ def _patch_scene(specs, seed, index, rects_per_scene, n_objects):
 
 def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int = 0,
                  n_scenes: int | None = None, rects_per_scene: int = 20, n_objects: int = 1,
-                 n_jobs: int = 1, progress: bool = False, executor=None) -> dict:
+                 n_jobs: int = 1, progress: bool = False, executor=None,
+                 scene: str = "drop") -> dict:
     """Random 6x6x8 patches (and masks) of rectangle images from random rendered scenes.
 
     Parameters
@@ -392,6 +423,9 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
     progress : bool
     executor : graspsim.executor.Executor or None
         Where scenes run (local cores or a Ray cluster); results do not depend on it.
+    scene : {"drop", "isolated", "packed", "pile"}
+        How the objects are put on the table (:mod:`graspsim.scenes`); packed and pile scenes
+        need ``n_objects`` > 1.
 
     Returns
     -------
@@ -400,15 +434,17 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
     """
     from dlsr.patches import sample_patches, save_patch_file
 
+    from .scenes import check_scene
     from .trials import _executor, resolve_objects
 
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
+    check_scene(scene, n_objects)
     specs = resolve_objects(objects)
     n_scenes = max(2, int(np.ceil(n / 2000))) if n_scenes is None else int(n_scenes)
     t0 = time.perf_counter()
     ex = _executor(executor, n_jobs, progress)
-    tasks = [(specs, seed, i, rects_per_scene, n_objects) for i in range(n_scenes)]
+    tasks = [(specs, seed, i, rects_per_scene, n_objects, scene) for i in range(n_scenes)]
     parts = list(ex.imap(_patch_scene, tasks, desc="scenes", star=True))
     images = np.concatenate([p[0] for p in parts])
     masks = np.concatenate([p[1] for p in parts])

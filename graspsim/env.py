@@ -106,7 +106,7 @@ class GraspEnv(gym.Env):
             from .gripper import hand_params
 
             self._params = replace(self._params, gripper=hand_params(gripper))
-        self.specs = resolve_objects(objects)
+        self.specs = resolve_objects(objects, self._params)
         self.declutter = bool(declutter)
         many = declutter or scene in ("packed", "pile")
         self.n_objects = (5 if many else 1) if n_objects is None else int(n_objects)

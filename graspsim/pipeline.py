@@ -125,6 +125,13 @@ class RunConfig:
         implies it), only rectangles whose jaws come down beside the object. The names are
         :mod:`graspsim.detector_options`' (shared with ``graspsim detect`` and ``graspsim
         benchmark detection``); ``graspsim run --no-complete-region`` etc. override them.
+    scene : {"drop", "isolated", "packed", "pile"}
+        How the objects of the dataset and of the trials are put on the table
+        (:mod:`graspsim.scenes`); packed and pile scenes have 5 objects (VGN, GIGA). Default
+        ``"drop"``: one object dropped at a random pose, the scene of the README's figures.
+    gripper : {"builtin", "franka"}
+        The hand that labels the dataset, executes the trials and that DLSR's gripper-aware
+        search judges rectangles for (:mod:`graspsim.hands`); default the built-in one.
     trials : int
         Simulated grasp trials per detector on the test objects.
     trial_candidates : int
@@ -167,6 +174,8 @@ class RunConfig:
     gripper_aware: bool = True
     complete_region: bool = True
     clear_jaws: bool = False
+    scene: str = "drop"
+    gripper: str = "builtin"
     trials: int = 100
     trial_candidates: int = 32
     baselines: list[str] = field(default_factory=lambda: ["mask-pca", "random", "oracle"])
@@ -196,6 +205,13 @@ class RunConfig:
         from .labelling import check_sampler
 
         check_sampler(self.label_sampler)
+        from .hands import HAND_NAMES
+        from .scenes import check_scene
+
+        check_scene(self.scene, self.objects_per_scene)
+        if self.gripper not in HAND_NAMES:
+            raise ValueError(f"gripper must be one of {', '.join(HAND_NAMES)}, "
+                             f"got {self.gripper!r}")
         for name in ("train_objects", "trial_objects"):
             value = getattr(self, name)
             if not isinstance(value, str):
@@ -210,6 +226,19 @@ class RunConfig:
         if self.scenes < self.folds:
             raise ValueError(f"{self.folds} folds need at least {self.folds} scenes")
         return self
+
+    @property
+    def objects_per_scene(self) -> int:
+        """Objects per scene: 5 in packed and pile scenes (VGN, GIGA), else 1."""
+        return 5 if self.scene in ("packed", "pile") else 1
+
+    def execution_params(self):
+        """The :class:`graspsim.execution.ExecutionParams` of the dataset's labelling and of
+        the trials: the defaults with ``gripper``'s hand."""
+        from .execution import ExecutionParams
+        from .gripper import hand_params
+
+        return ExecutionParams(gripper=hand_params(self.gripper))
 
     def object_set(self, name: str = "trial_objects"):
         """The :class:`graspsim.object_sets.ObjectSet` of ``train_objects`` or
@@ -429,7 +458,8 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
                              objects=config.object_set("train_objects"),
                              out=root / "dataset", seed=seeds["dataset"],
                              n_candidates=config.candidates, sampler=config.label_sampler,
-                             executor=ex)
+                             executor=ex, n_objects=config.objects_per_scene,
+                             scene=config.scene, params=config.execution_params())
         stats["seconds"] = time.perf_counter() - t0
         stages.finish("dataset", stats)
     from dlsr.datasets import load_cornell
@@ -535,17 +565,19 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
     """
     from .trials import TrialConfig, run_trials
 
-    trial_cfg = TrialConfig(n_candidates=config.trial_candidates, sampler=config.label_sampler)
+    trial_cfg = TrialConfig(n_candidates=config.trial_candidates, sampler=config.label_sampler,
+                            n_objects=config.objects_per_scene, scene=config.scene)
     for name in trial_names(config):
         key = f"trials/{name}"
         if stages.done(key):
             continue
         t0 = time.perf_counter()
-        det = _trial_detector(name, model_path, config)
+        det = _trial_detector(name, model_path, config, hand=config.gripper)
         s = run_trials(det, objects=config.object_set("trial_objects"), n=config.trials,
                        seed=seed,
                        out=root / "trials" / name, config=trial_cfg, executor=executor,
-                       progress=progress, detector_name=name)
+                       progress=progress, detector_name=name,
+                       params=config.execution_params())
         s.pop("records", None)
         s["seconds"] = time.perf_counter() - t0
         stages.finish(key, s)

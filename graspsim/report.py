@@ -187,6 +187,16 @@ def _save(fig, path) -> Path:
     return path
 
 
+def _scene_phrase(config) -> str:
+    """How the report names a run's ``scene`` and ``gripper`` when they are not the defaults."""
+    parts = []
+    if config.scene != "drop":
+        parts.append(f"{config.scene} scenes of {config.objects_per_scene} objects")
+    if config.gripper != "builtin":
+        parts.append(f"the {config.gripper} hand")
+    return (", ".join(parts).capitalize() + ". ") if parts else ""
+
+
 def _objects_phrase(objects: str) -> str:
     """How the report names a run's ``train_objects`` or ``trial_objects`` setting."""
     if objects in ("train", "test", "all"):
@@ -467,7 +477,7 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
     blocks.append(("p", f"DLSR {combo} (d = {config.n_atoms}) trained on {config.scenes} "
                         f"synthetic Cornell images of {_objects_phrase(config.train_objects)}; "
                         f"simulated grasp trials on {_objects_phrase(config.trial_objects)}. "
-                        f"Seed {config.seed}."
+                        + _scene_phrase(config) + f"Seed {config.seed}."
                    + (f" Wall time {wall / 60:.1f} min." if wall else "")))
     training = ("the paper's training (labelled rectangles only)" if not config.grid_negatives
                 else f"{config.grid_negatives:g} negative(s) per labelled rectangle from its "

@@ -501,7 +501,10 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
               "object_set": object_set,
               "predictions": str(pred_path.resolve()),
               "predictions_sha256": _predictions_sha256(pred_path, fmt),
-              "format": fmt, "top_k": top_k}
+              "format": fmt, "top_k": top_k,
+              # the hand and harness the dataset was labelled with, which execute the
+              # predictions too (named in the summary when not the defaults)
+              "execution": manifest["execution"]}
     done: dict[int, dict] = {}
     jsonl = None
     if out is not None:

@@ -139,8 +139,8 @@ def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
     return (float(max(0.0, centre - half)), float(min(1.0, centre + half)))
 
 
-def resolve_objects(objects) -> list[ObjectSpec]:
-    """The objects of a run.
+def resolve_objects(objects, params: ExecutionParams | None = None) -> list[ObjectSpec]:
+    """The objects of a run, with their graspable flags for the run's hand.
 
     Parameters
     ----------
@@ -151,6 +151,10 @@ def resolve_objects(objects) -> list[ObjectSpec]:
         a seed depend on the names chosen, not on how they are listed),
         ``"random_urdfs[:train|test|all]"``, ``"folder:PATH[:train|test|all]"``), an
         :class:`~graspsim.object_sets.ObjectSet`, or ObjectSpecs.
+    params : ExecutionParams or None
+        The harness and hand the run executes with (default: the built-in hand): the
+        ``graspable`` flags are those measured by physics with this hand
+        (:func:`graspsim.graspability.apply_graspability`), where a manifest has them.
 
     Raises
     ------
@@ -163,7 +167,7 @@ def resolve_objects(objects) -> list[ObjectSpec]:
     if not specs:
         raise ValueError(f"no objects in {objects!r}")
     # The graspable flag by physics where a manifest has it (graspsim.graspability).
-    return apply_graspability(specs)
+    return apply_graspability(specs, params=params)
 
 
 def object_set_meta(objects, specs) -> dict:
@@ -541,7 +545,7 @@ def _campaign_setup(detector, detector_name, objects, n: int, seed: int, config,
     :func:`graspsim.declutter.run_rounds`."""
     check_scene(config.scene, config.n_objects)
     det, det_name = _resolve(detector, detector_name)
-    specs = resolve_objects(objects)
+    specs = resolve_objects(objects, params)
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
     meta = {"detector": det_name, **object_set_meta(objects, specs), "seed": seed,

@@ -1,8 +1,8 @@
 """Draw the top rectangle on the two real Cornell images: docs/real_cornell_top.png.
 
-A small model is trained on the real Jacquard samples as the real-data default trains it
-(physical features on the estimated Jacquard camera matrix; 14 views, 40 grasps each, 50
-atoms, as the test of ``graspsim detect`` on the remote), or ``--model`` is used; each Cornell
+A small model is trained on the real Jacquard samples as the real-data default
+(``--preset real``) trains it (the paper's training; 14 views, 40 grasps each, 50 atoms, as
+the test of ``graspsim detect`` on the remote), or ``--model`` is used; each Cornell
 image is then searched with the default options and with the paper's configuration
 (``--preset paper``), the Cornell camera matrix found by ``graspsim detect``'s own rule
 (:func:`dlsr.intrinsics.cornell_camera_matrix`). Top row: default; bottom row: the paper's.
@@ -31,7 +31,8 @@ CROP = (150, 200, 450, 420)  # x0, y0, x1, y1: the remote and the table around i
 
 
 def small_jacquard_model(root, seed: int = 0) -> DLSRDetector:
-    """The test's small model: 14 random views, 40 grasps each, physical features."""
+    """The test's small model: 14 random views, 40 grasps each, trained as the real-data
+    default trains (physical features only if it has them)."""
     rng = np.random.default_rng(seed)
     views = load_jacquard(root, depth="perfect", scale=0.5)
     views = [views[i] for i in np.sort(rng.choice(len(views), 14, replace=False))]
@@ -39,7 +40,7 @@ def small_jacquard_model(root, seed: int = 0) -> DLSRDetector:
         rng.choice(len(v.positives), min(40, len(v.positives)), replace=False))])
         for v in views]
     return train_detector(views, n_atoms=50, n_patches=10_000, random_state=seed,
-                          physical=True)
+                          physical=PRESETS[REAL_DEFAULT].physical)
 
 
 def main(argv=None) -> int:

@@ -99,7 +99,7 @@ def _records(folder: Path, unit: str) -> dict[int, dict]:
 def row_results(out: Path, row: str) -> dict:
     """Every detector's figures in ``row`` and its paired verdict against mask-pca, on the
     trials or rounds all four detectors finished."""
-    from graspsim.compare import compare_outcomes, mcnemar_exact
+    from graspsim.compare import compare_outcomes, first_grasp, removed_sign_test
     from graspsim.declutter import summarize_rounds
     from graspsim.trials import summarize, wilson_interval
 
@@ -117,8 +117,7 @@ def row_results(out: Path, row: str) -> dict:
                     "success_ci95": s["success_ci95"]}
         else:
             s = summarize_rounds(rs, random_state=0)
-            first = [bool(r["attempts"] and r["attempts"][0]["success"]) for r in rs]
-            kf = sum(first)
+            kf = sum(first_grasp(r) for r in rs)
             cell = {"successes": s["successes"], "attempts": s["attempts"],
                     "success_rate": s["success_rate"], "success_ci95": s["success_ci95"],
                     "removed": s["removed"], "placed": s["objects_placed"],
@@ -137,15 +136,13 @@ def row_results(out: Path, row: str) -> dict:
             res["cells"][d]["vs_mask_pca"] = {"p": c["mcnemar_p"], "better": c["better"],
                                               "verdict": c["verdict"]}
         else:
-            first = [bool(r["attempts"] and r["attempts"][0]["success"]) for r in rs]
-            first_b = [bool(r["attempts"] and r["attempts"][0]["success"]) for r in base]
-            c = compare_outcomes(first, first_b, names=(d, "mask-pca"), unit="first grasps")
-            wins = sum(r["removed"] > b["removed"] for r, b in zip(rs, base, strict=True))
-            losses = sum(r["removed"] < b["removed"] for r, b in zip(rs, base, strict=True))
+            c = compare_outcomes([first_grasp(r) for r in rs], [first_grasp(r) for r in base],
+                                 names=(d, "mask-pca"), unit="first grasps")
+            t = removed_sign_test([r["removed"] for r in rs], [b["removed"] for b in base])
             res["cells"][d]["vs_mask_pca"] = {
                 "p": c["mcnemar_p"], "better": c["better"], "verdict": c["verdict"],
-                "removed_more": wins, "removed_fewer": losses,
-                "sign_test_p": mcnemar_exact(wins, losses)}
+                "removed_more": t["more"], "removed_fewer": t["fewer"],
+                "sign_test_p": t["sign_test_p"]}
     return res
 
 

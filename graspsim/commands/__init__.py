@@ -61,6 +61,42 @@ def add_object_args(p: argparse.ArgumentParser, default: str | None = "test",
                         "them); default: one convex hull per OBJ group")
 
 
+def add_scene_arg(p: argparse.ArgumentParser) -> None:
+    """``--scene drop|isolated|packed|pile`` (:mod:`graspsim.scenes`), one definition for every
+    command that builds scenes."""
+    from graspsim.scenes import SCENES
+
+    p.add_argument("--scene", default="drop", choices=list(SCENES),
+                   help="how objects are put on the table: drop (default: dropped one by one "
+                        "at random poses), isolated (drop with one object), packed (upright "
+                        "side by side, VGN/GIGA), pile (dropped into a box, then the box "
+                        "removed, VGN/GIGA); recorded in the output's configuration")
+
+
+def objects_per_scene(args: argparse.Namespace, clutter: bool = False) -> int:
+    """``--objects-per-scene``, or its default: 5 for ``--scene packed|pile`` (and for
+    ``clutter``, the declutter rounds), else 1."""
+    k = args.objects_per_scene
+    if k is None:
+        k = 5 if clutter or args.scene in ("packed", "pile") else 1
+    if k < 1:
+        raise ValueError(f"--objects-per-scene must be >= 1, got {k}")
+    return k
+
+
+def add_gripper_arg(p: argparse.ArgumentParser) -> None:
+    """``--gripper builtin|franka`` (:mod:`graspsim.hands`), one definition for every command
+    that executes grasps."""
+    from graspsim.hands import HAND_NAMES
+
+    p.add_argument("--gripper", default="builtin", choices=list(HAND_NAMES),
+                   help="the hand: builtin (default: graspsim's parallel jaw) or franka (the "
+                        "Franka Emika hand of pybullet_data's franka_panda, floating as in "
+                        "VGN/GIGA: 8 cm stroke, 70 N grasp force); labelling, --gripper-aware "
+                        "and execution use its geometry; recorded in the output's "
+                        "configuration")
+
+
 def object_set_from_args(args: argparse.Namespace):
     """The :class:`graspsim.object_sets.ObjectSet` that :func:`add_object_args` describes
     (None when ``--objects`` was not given and has no default)."""

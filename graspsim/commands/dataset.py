@@ -6,7 +6,15 @@ import argparse
 
 from graspsim.profiles import PROFILES
 
-from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
+from . import (
+    add_executor_args,
+    add_gripper_arg,
+    add_object_args,
+    add_scene_arg,
+    executor_from_args,
+    object_set_from_args,
+    objects_per_scene,
+)
 
 
 def register(subparsers) -> None:
@@ -21,7 +29,10 @@ def register(subparsers) -> None:
     p.add_argument("--sampler", default="mixed", choices=["mixed", "dense"],
                    help="labelling candidates: mixed (centroid, chord, random) or dense "
                         "(Jacquard-like lattice, every 15 deg; --candidates is its budget)")
-    p.add_argument("--objects-per-scene", type=int, default=1)
+    p.add_argument("--objects-per-scene", type=int, default=None,
+                   help="default: 1, or 5 with --scene packed or pile")
+    add_scene_arg(p)
+    add_gripper_arg(p)
     p.add_argument("--profile", default="default", choices=sorted(PROFILES),
                    help="how scenes are seen: camera, table, lighting, depth noise "
                         "(docs/sim_settings.md; default: %(default)s)")
@@ -31,12 +42,16 @@ def register(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from graspsim.datagen import make_dataset
+    from graspsim.execution import ExecutionParams
+    from graspsim.gripper import hand_params
 
+    k = objects_per_scene(args)
     s = make_dataset(n_scenes=args.scenes, objects=object_set_from_args(args), out=args.out,
                      seed=args.seed,
-                     n_candidates=args.candidates, n_objects=args.objects_per_scene,
+                     n_candidates=args.candidates, n_objects=k,
                      sampler=args.sampler, profile=args.profile,
-                     executor=executor_from_args(args))
+                     executor=executor_from_args(args), scene=args.scene,
+                     params=ExecutionParams(gripper=hand_params(args.gripper)))
     print(f"wrote {s['images']} images ({s['positives']} positives, {s['negatives']} negatives) "
           f"to {args.out}; manifest {s['manifest']} (sha256 {s['fingerprint'][:12]}...)")
     return 0

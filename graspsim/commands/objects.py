@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 
-from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
+from . import (
+    add_executor_args,
+    add_gripper_arg,
+    add_object_args,
+    executor_from_args,
+    object_set_from_args,
+)
 
 
 def register(subparsers) -> None:
@@ -24,16 +30,20 @@ def register(subparsers) -> None:
                         "DEFAULT_POSES)")
     p.add_argument("--measure", action="store_true",
                    help="measure the flags not yet cached (minutes for 100 objects)")
+    add_gripper_arg(p)
     add_executor_args(p)
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
+    from graspsim.execution import ExecutionParams
     from graspsim.graspability import DEFAULT_POSES, object_table, object_table_text
+    from graspsim.gripper import hand_params
 
     rows = object_table(object_set_from_args(args),
                         DEFAULT_POSES if args.poses is None else args.poses,
                         measure=args.measure,
-                        executor=executor_from_args(args) if args.measure else None)
+                        executor=executor_from_args(args) if args.measure else None,
+                        params=ExecutionParams(gripper=hand_params(args.gripper)))
     print(json.dumps(rows, indent=1) if args.json else object_table_text(rows), end="\n")
     return 0

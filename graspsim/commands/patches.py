@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
+from . import (
+    add_executor_args,
+    add_object_args,
+    add_scene_arg,
+    executor_from_args,
+    object_set_from_args,
+    objects_per_scene,
+)
 
 
 def register(subparsers) -> None:
@@ -16,6 +23,9 @@ def register(subparsers) -> None:
     add_object_args(p, default="all")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--scenes", type=int, default=None, help="default: n / 2000")
+    p.add_argument("--objects-per-scene", type=int, default=None,
+                   help="default: 1, or 5 with --scene packed or pile")
+    add_scene_arg(p)
     add_executor_args(p)
     p.set_defaults(func=_run)
 
@@ -23,7 +33,9 @@ def register(subparsers) -> None:
 def _run(args: argparse.Namespace) -> int:
     from graspsim.datagen import make_patches
 
+    k = objects_per_scene(args)
     s = make_patches(n=args.n, out=args.out, objects=object_set_from_args(args), seed=args.seed,
-                     n_scenes=args.scenes, executor=executor_from_args(args))
+                     n_scenes=args.scenes, n_objects=k, executor=executor_from_args(args),
+                     scene=args.scene)
     print(f"wrote {s['n']} patches from {s['scenes']} scenes to {s['path']}")
     return 0

@@ -4,11 +4,17 @@ from __future__ import annotations
 
 import argparse
 
-from graspsim.hands import HAND_NAMES
 from graspsim.profiles import PROFILES
-from graspsim.scenes import SCENES
 
-from . import add_executor_args, add_object_args, executor_from_args, object_set_from_args
+from . import (
+    add_executor_args,
+    add_gripper_arg,
+    add_object_args,
+    add_scene_arg,
+    executor_from_args,
+    object_set_from_args,
+    objects_per_scene,
+)
 
 
 def register(subparsers) -> None:
@@ -48,11 +54,7 @@ def register(subparsers) -> None:
     p.add_argument("--objects-per-scene", type=int, default=None,
                    help="1: Cornell-like (default); >1 clutter (default 5 with --declutter, "
                         "--scene packed or --scene pile)")
-    p.add_argument("--scene", default="drop", choices=list(SCENES),
-                   help="how objects are put on the table: drop (default: dropped one by one "
-                        "at random poses), isolated (drop with one object), packed (upright "
-                        "side by side, VGN/GIGA), pile (dropped into a box, then the box "
-                        "removed, VGN/GIGA); recorded in config.json")
+    add_scene_arg(p)
     p.add_argument("--min-grip", type=float, default=None, metavar="METRES",
                    help="fingers that would meet a surface above the table on the way down "
                         "(a plate or bowl under the object) stop 2 mm short of it when their "
@@ -60,11 +62,7 @@ def register(subparsers) -> None:
                         "centre; --gripper-aware judges rectangles the same way. Off by "
                         "default (not adopted: README, 'Clutter removal'); recorded in "
                         "config.json")
-    p.add_argument("--gripper", default="builtin", choices=list(HAND_NAMES),
-                   help="the hand: builtin (default: graspsim's parallel jaw) or franka (the "
-                        "Franka Emika hand of pybullet_data's franka_panda, floating as in "
-                        "VGN/GIGA: 8 cm stroke, 70 N grasp force); labelling, --gripper-aware "
-                        "and execution use its geometry; recorded in config.json")
+    add_gripper_arg(p)
     p.add_argument("--declutter", action="store_true",
                    help="clutter-removal rounds: a lifted object leaves the scene and the "
                         "detector grasps again; reports grasp success and declutter rates "
@@ -77,11 +75,7 @@ def _run(args: argparse.Namespace) -> int:
     from graspsim.gripper import hand_params
     from graspsim.trials import TrialConfig, run_trials
 
-    k = args.objects_per_scene
-    if k is None:
-        k = 5 if args.declutter or args.scene in ("packed", "pile") else 1
-    if k < 1:
-        raise ValueError(f"--objects-per-scene must be >= 1, got {k}")
+    k = objects_per_scene(args, clutter=args.declutter)
     if args.n < 0:
         raise ValueError(f"--n must be >= 0, got {args.n}")
     config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler,

@@ -219,25 +219,42 @@ def test_detect_grasps_the_remote_across_from_depth_alone(cornell_samples_root, 
 @pytest.fixture(scope="module")
 def jacquard_default_model(jacquard_root, tmp_path_factory):
     """A small model trained on 14 of the 28 real Jacquard views as the real-data default
-    trains (physical features, on the estimated Jacquard camera matrix), the paper's grid
-    otherwise: about 30 to 90 s on 2 shared cores."""
+    trains (``--preset real``: the paper's training, no physical features): about 25 s on 2
+    cores."""
+    from graspsim.detector_options import PRESETS, REAL_DEFAULT
+
     views = _jacquard_training_views(jacquard_root)
-    model = train_detector(views, n_atoms=50, n_patches=10_000, random_state=0, physical=True)
+    model = train_detector(views, n_atoms=50, n_patches=10_000, random_state=0,
+                           physical=PRESETS[REAL_DEFAULT].physical)
     path = tmp_path_factory.mktemp("jacquard_default_model") / "m"
     model.save(path)
     return path
 
 
+@pytest.fixture(scope="module")
+def jacquard_physical_model(jacquard_root, tmp_path_factory):
+    """The same views with physical features (on the estimated Jacquard camera matrix), as
+    ``--preset all`` trains: about 30 to 90 s on 2 shared cores."""
+    views = _jacquard_training_views(jacquard_root)
+    model = train_detector(views, n_atoms=50, n_patches=10_000, random_state=0, physical=True)
+    path = tmp_path_factory.mktemp("jacquard_physical_model") / "m"
+    model.save(path)
+    return path
+
+
 @pytest.mark.slow
+@pytest.mark.parametrize("preset,which", [(None, "jacquard_default_model"),
+                                          ("all", "jacquard_physical_model")])
 @pytest.mark.parametrize("image", ["0100", "0101"])
-def test_default_options_grasp_the_real_remote_across(cornell_samples_root,
-                                                     jacquard_default_model, image, capsys):
-    """With default options (the lattice on the completed region, the physical term and the
-    gripper-aware check on the Cornell camera matrix), the top rectangle closes across the
-    remote's short side, centred on it, opening wider than the remote."""
+def test_default_options_grasp_the_real_remote_across(cornell_samples_root, preset, which,
+                                                     image, request, capsys):
+    """With default options (``--preset real``: rectangles fitted to the object region), and
+    with every departure (``--preset all``, a model with physical features), the top rectangle
+    closes across the remote's short side, centred on it, opening wider than the remote."""
+    model = request.getfixturevalue(which)
     rgb, depth = _cornell(cornell_samples_root, image)
-    code = main(["detect", "--model", str(jacquard_default_model), "--rgb", str(rgb),
-                 "--depth", str(depth), "--top-k", "1"])
+    code = main(["detect", "--model", str(model), "--rgb", str(rgb), "--depth", str(depth),
+                 "--top-k", "1", *(["--preset", preset] if preset else [])])
     assert code == 0
     best = json.loads(capsys.readouterr().out)["rectangles"][0]
     rect = [best[k] for k in ("x", "y", "theta", "w", "h")]
@@ -248,21 +265,22 @@ def test_default_options_grasp_the_real_remote_across(cornell_samples_root,
 
 
 def test_detect_uses_the_camera_file_beside_a_cornell_image(cornell_samples_root,
-                                                            jacquard_default_model,
+                                                            jacquard_physical_model,
                                                             tmp_path, capsys):
     """``graspsim detect`` finds a Cornell image's camera matrix itself (the cache of the fit
-    to its point cloud, ``pcdXXXXcamera.json``): with a focal length of 150 px a rectangle
-    across the remote (over 30 px) would be wider than the gripper opens (8 cm at about
-    0.75 m is 16 px), so the top rectangle is a narrow one."""
+    to its point cloud, ``pcdXXXXcamera.json``) for the options that need it (here every
+    departure, ``--preset all``): with a focal length of 150 px a rectangle across the remote
+    (over 30 px) would be wider than the gripper opens (8 cm at about 0.75 m is 16 px), so the
+    top rectangle is a narrow one."""
     from dlsr.intrinsics import camera_matrix, write_camera_file
 
     for name in ("pcd0100r.png", "pcd0100d.tiff"):
         (tmp_path / name).write_bytes((cornell_samples_root / name).read_bytes())
     write_camera_file(tmp_path / "pcd0100camera.json", camera_matrix(150, 150, 319.5, 239.5),
                       "test")
-    code = main(["detect", "--model", str(jacquard_default_model), "--rgb",
+    code = main(["detect", "--model", str(jacquard_physical_model), "--rgb",
                  str(tmp_path / "pcd0100r.png"), "--depth", str(tmp_path / "pcd0100d.tiff"),
-                 "--top-k", "1"])
+                 "--top-k", "1", "--preset", "all"])
     out = capsys.readouterr().out
     if code == 0:
         assert json.loads(out)["rectangles"][0]["w"] <= 0.08 * 150 / 0.7, out
@@ -274,10 +292,11 @@ def test_detect_without_intrinsics_on_other_files_says_what_to_give(saved_model,
                                                                     capsys):
     path, _ = saved_model
     rgb, depth, mask = obs_files
+    # the gripper-aware check needs the camera matrix; the default (--preset real) does not
     code = main(["detect", "--model", str(path), "--rgb", str(rgb), "--depth", str(depth),
-                 "--mask", str(mask)])
+                 "--mask", str(mask), "--gripper-aware"])
     assert code == 2
     assert "--intrinsics" in capsys.readouterr().err
     code = main(["detect", "--model", str(path), "--rgb", str(rgb), "--depth", str(depth),
-                 "--mask", str(mask), "--no-gripper-aware"])
+                 "--mask", str(mask)])
     assert code == 0

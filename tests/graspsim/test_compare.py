@@ -375,3 +375,45 @@ def test_an_unfinished_objectwise_validation_is_named(tmp_path):
     (a / "objectwise.json").unlink()
     with pytest.raises(FileNotFoundError, match="unfinished object-wise validation"):
         load_folder(a)
+
+
+def _rounds(path, detector, rounds, seed=0, scene="pile"):
+    """A clutter-round folder: ``rounds`` is a list of (first grasp succeeded or None for
+    nothing proposed, objects removed)."""
+    path.mkdir(parents=True)
+    cfg = {"detector": detector, "objects": "test", "seed": seed,
+           "config": {"n_candidates": 0, "n_objects": 3, "scene": scene}}
+    (path / "config.json").write_text(json.dumps(cfg))
+    with open(path / "rounds.jsonl", "w") as fh:
+        for i, (first, removed) in enumerate(rounds):
+            attempts = [] if first is None else [{"attempt": 0, "success": bool(first)}]
+            fh.write(json.dumps({"index": i, "seed": seed, "objects": OBJECTS[:3],
+                                 "attempts": attempts, "removed": removed}) + "\n")
+    return path
+
+
+def test_clutter_rounds_pair_on_first_grasps_with_a_sign_test_on_removals(tmp_path, capsys):
+    a = _rounds(tmp_path / "a", "dlsr", [(1, 3), (1, 2), (0, 0), (1, 1), (None, 0), (1, 2)])
+    b = _rounds(tmp_path / "b", "mask-pca", [(0, 0), (1, 2), (0, 1), (0, 0), (1, 1), (0, 0)])
+    c = compare_pair(a, b)
+    assert c["kind"] == "rounds" and c["unit"] == "rounds (first grasps)"
+    # first grasps: a 4 of 6 (nothing proposed is a failure), b 1 of 6
+    assert c["counts"] == {"both": 1, "only_a": 3, "only_b": 1, "neither": 1}
+    r = c["removed"]
+    assert (r["a"], r["b"], r["more"], r["fewer"], r["same"]) == (8, 4, 3, 2, 1)
+    assert r["sign_test_p"] == pytest.approx(_binomial_mcnemar(3, 2))
+    assert main(["compare", str(a), str(b)]) == 0
+    out = capsys.readouterr().out
+    assert "6 paired rounds (first grasps)" in out
+    assert "dlsr removed more in 3 rounds, fewer in 2" in out
+    # rounds of another scene protocol, or a trial folder, do not pair
+    other = _rounds(tmp_path / "c", "mask-pca", [(0, 0)] * 6, scene="packed")
+    with pytest.raises(ValueError, match="scene pile vs packed"):
+        compare_pair(a, other)
+    with pytest.raises(ValueError, match="a rounds folder against a trials folder"):
+        compare_pair(a, _trials(tmp_path / "t", "x", [1, 0]))
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "config.json").write_text(json.dumps({"seed": 0, "objects": "test"}))
+    (tmp_path / "bad" / "rounds.jsonl").write_text(json.dumps({"index": 0}) + "\n")
+    with pytest.raises(ValueError, match="round record 1 has no 'attempts'"):
+        compare_pair(a, tmp_path / "bad")

@@ -133,3 +133,54 @@ def test_dense_sampler_labels_the_lattice_and_is_recorded(tmp_path, easy_objects
         make_dataset(n_scenes=1, objects=easy_objects[:1], out=root, seed=4, n_candidates=24)
     with pytest.raises(ValueError, match="sampler must be one of"):
         make_dataset(n_scenes=1, objects=easy_objects[:1], out=tmp_path / "x", sampler="grid")
+
+
+def test_a_pile_labelled_with_the_franka_hand_is_recorded_and_scored_with_it(tmp_path, capsys,
+                                                                             easy_objects):
+    from graspsim.cli import main
+    from graspsim.execution import ExecutionParams
+    from graspsim.gripper import hand_params
+    from graspsim.scoring import execution_params, score_predictions
+
+    franka = ExecutionParams(gripper=hand_params("franka"))
+    root = tmp_path / "pile"
+    names = ",".join(s.name for s in easy_objects)
+    args = ["dataset", "--scenes", "1", "--objects", names, "--candidates", "6", "--seed", "2",
+            "--scene", "pile", "--objects-per-scene", "3", "--gripper", "franka",
+            "--out", str(root)]
+    assert main(args) == 0
+    config = json.loads((root / "dataset_config.json").read_text())
+    assert config["scene"] == "pile" and config["execution"]["gripper"]["hand"] == "franka"
+    manifest = json.loads((root / MANIFEST).read_text())
+    assert manifest["generator"]["scene"] == "pile"
+    assert len(manifest["images"][0]["objects"]) == 3
+    assert execution_params(manifest) == franka  # what scoring executes predictions with
+    (sample,) = load_cornell(root)
+    rects = [*sample.positives, *sample.negatives][:1]
+    preds = tmp_path / "p.csv"
+    preds.write_text("image,x,y,theta_deg,w,h\n" + "".join(
+        f"{sample.image_id},{r.x},{r.y},{np.degrees(r.theta)},{r.w},{r.h}\n" for r in rects))
+    scored = score_predictions(root, preds)
+    assert scored["execution"]["gripper"]["hand"] == "franka"
+    # the same folder with the built-in hand is another configuration
+    capsys.readouterr()
+    assert main([a if a != "franka" else "builtin" for a in args]) == 2
+    assert "another configuration" in capsys.readouterr().err
+    assert main(["dataset", "--scenes", "1", "--scene", "isolated", "--objects-per-scene", "3",
+                 "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert "the isolated scene has one object" in err and len(err.strip().splitlines()) == 1
+
+
+def test_patches_of_packed_scenes(tmp_path, easy_objects):
+    from dlsr.patches import load_patch_file
+    from graspsim.cli import main
+
+    out = tmp_path / "packed.npz"
+    names = ",".join(s.name for s in easy_objects)
+    assert main(["patches", "--n", "100", "--objects", names, "--scenes", "1", "--scene",
+                 "packed", "--objects-per-scene", "2", "--out", str(out)]) == 0
+    P, M = load_patch_file(out)
+    assert P.shape == (100, 6, 6, 8) and M.shape == P.shape
+    with pytest.raises(ValueError, match="unknown scene"):
+        make_patches(n=10, out=tmp_path / "y.npz", objects=easy_objects, scene="heap")

@@ -53,9 +53,13 @@ def test_presets_and_overrides():
                             "--preset", "paper", "--clear-jaws"])
     assert options_from_args(args) == dataclasses.replace(PRESETS["paper"], clear_jaws=True)
     args = root.parse_args(["benchmark", "detection", "--data", "x", "--format", "jacquard",
-                            "--out", "o", "--no-physical", "--detector", "dense"])
+                            "--out", "o", "--preset", "all", "--no-physical", "--detector",
+                            "dense"])
     o = options_from_args(args)
     assert (o.detector, o.physical, o.gripper_aware) == ("dense", False, True)
+    # the real-data default is the choice of the nested cross-validation: the lattice alone
+    assert PRESETS[REAL_DEFAULT] == candidate_options()["paper+lattice"]
+    assert PRESETS["all"] == DetectorOptions()
 
 
 def test_run_flags_override_the_config():

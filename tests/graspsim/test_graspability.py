@@ -114,3 +114,26 @@ def test_objects_command_prints_a_table_and_json(capsys):
 def test_objects_command_refuses_a_bad_set(tmp_path, capsys):
     assert main(["objects", f"folder:{tmp_path / 'nope'}"]) != 0
     assert "object folder not found" in capsys.readouterr().err
+
+
+def test_a_runs_flags_are_those_of_its_hand(user_cache, capsys):
+    from graspsim.gripper import hand_params
+
+    franka = ExecutionParams(gripper=hand_params("franka"))
+    spec = _spec("can_soda")
+    assert resolve_objects("can_soda")[0].graspable  # by the committed built-in hand's flags
+    key = g.gripper_key(franka)
+    assert key != g.gripper_key()
+    path = g._manifest_paths(key)[1]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    g._write_entries(path, key, {g.object_key(spec): {
+        "name": "can_soda", "first_success": None, "poses_tried": g.DEFAULT_POSES}})
+    assert resolve_objects("can_soda", franka)[0].graspable is False
+    assert resolve_objects("can_soda")[0].graspable
+    # and graspsim objects lists the flags of the hand it is given
+    capsys.readouterr()
+    assert main(["objects", "can_soda", "--json", "--gripper", "franka"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["graspable"] is False and row["graspable_by"] == "physics"
+    assert main(["objects", "can_soda", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)[0]["graspable"] is True

@@ -353,3 +353,39 @@ def test_committed_configs_load(name):
     assert cfg.trials == 500 and cfg.name == path.stem
     assert cfg.gripper_aware and cfg.grid_negatives == 0.0  # the defaults they build on
     assert cfg.physical and cfg.detector == "lattice"
+
+
+def test_scene_and_gripper_reach_the_dataset_and_the_trials(tmp_path, monkeypatch):
+    class Stop(Exception):
+        pass
+
+    seen = {}
+
+    def fake_dataset(**kw):
+        seen.update(kw)
+        raise Stop
+
+    monkeypatch.setattr("graspsim.datagen.make_dataset", fake_dataset)
+    cfg = pipeline.load_config(**{**TINY, "scene": "packed", "gripper": "franka"})
+    with pytest.raises(Stop):
+        pipeline.run_job(cfg, out=tmp_path / "run", progress=False)
+    assert seen["scene"] == "packed" and seen["n_objects"] == 5
+    assert seen["params"].gripper.hand == "franka"
+    recorded = json.loads((tmp_path / "run" / "run.json").read_text())["config"]
+    assert (recorded["scene"], recorded["gripper"]) == ("packed", "franka")
+
+    calls = []
+    monkeypatch.setattr(pipeline, "_trial_detector",
+                        lambda name, path, config, hand="builtin": (name, hand))
+    monkeypatch.setattr("graspsim.trials.run_trials",
+                        lambda det, **kw: calls.append((det, kw)) or {"n": 0})
+    pipeline.trial_stage(tmp_path, cfg, pipeline._Stages(tmp_path), tmp_path / "m", 0, None,
+                         progress=False)
+    assert [d for d, _ in calls] == [(n, "franka") for n in pipeline.trial_names(cfg)]
+    for _, kw in calls:
+        assert kw["params"].gripper.hand == "franka"
+        assert (kw["config"].scene, kw["config"].n_objects) == ("packed", 5)
+    with pytest.raises(ValueError, match="unknown scene 'heap'"):
+        pipeline.load_config(scene="heap")
+    with pytest.raises(ValueError, match="gripper must be one of builtin, franka"):
+        pipeline.load_config(gripper="robotiq")
