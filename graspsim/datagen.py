@@ -257,7 +257,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         (``generator.scene``).
     params : graspsim.execution.ExecutionParams or None
         The harness and hand the candidates are executed with (None: the defaults, the
-        built-in hand; ``ExecutionParams(gripper=hand_params("franka"))`` for the Franka
+        built-in hand; ``ExecutionParams.with_hand("franka")`` for the Franka
         hand). Recorded in ``scenes.json`` (``execution``), so :mod:`graspsim.scoring` executes
         predictions with the same hand; any other than the defaults also in
         ``dataset_config.json``.

@@ -43,7 +43,7 @@ from dlsr.rectangles import GraspRectangle
 from .execution import ExecutionParams, execute_grasp, harness_grasps, run_grasp
 from .labelling import label_rectangles, rank_positives, sample_candidates
 from .scene import build_scene
-from .scenes import check_scene, make_scene_of
+from .scenes import check_scene, default_objects_per_scene, make_scene_of
 from .sim import Simulation
 from .trials import profile_capture
 
@@ -108,8 +108,8 @@ class GraspEnv(gym.Env):
             self._params = replace(self._params, gripper=hand_params(gripper))
         self.specs = resolve_objects(objects, self._params)
         self.declutter = bool(declutter)
-        many = declutter or scene in ("packed", "pile")
-        self.n_objects = (5 if many else 1) if n_objects is None else int(n_objects)
+        self.n_objects = (default_objects_per_scene(scene, declutter) if n_objects is None
+                          else int(n_objects))
         self.scene = check_scene(scene, self.n_objects)
         self.n_candidates = int(n_candidates)
         self.noise = noise

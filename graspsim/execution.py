@@ -101,6 +101,14 @@ class ExecutionParams:
     still_checks: int = 2
     min_grip: float | None = None
 
+    @classmethod
+    def with_hand(cls, hand: str = "builtin", **fields) -> ExecutionParams:
+        """The parameters with ``hand``'s gripper (:func:`graspsim.gripper.hand_params`:
+        ``"builtin"`` or ``"franka"``; an unknown name is a ValueError) and ``fields`` set."""
+        from .gripper import hand_params
+
+        return cls(gripper=hand_params(hand), **fields)
+
     def __post_init__(self):
         if self.min_grip is not None and not float(self.min_grip) >= 0:
             raise ValueError(f"ExecutionParams.min_grip must be None or >= 0 metres, "

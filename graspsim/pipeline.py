@@ -230,15 +230,16 @@ class RunConfig:
     @property
     def objects_per_scene(self) -> int:
         """Objects per scene: 5 in packed and pile scenes (VGN, GIGA), else 1."""
-        return 5 if self.scene in ("packed", "pile") else 1
+        from .scenes import default_objects_per_scene
+
+        return default_objects_per_scene(self.scene)
 
     def execution_params(self):
         """The :class:`graspsim.execution.ExecutionParams` of the dataset's labelling and of
         the trials: the defaults with ``gripper``'s hand."""
         from .execution import ExecutionParams
-        from .gripper import hand_params
 
-        return ExecutionParams(gripper=hand_params(self.gripper))
+        return ExecutionParams.with_hand(self.gripper)
 
     def object_set(self, name: str = "trial_objects"):
         """The :class:`graspsim.object_sets.ObjectSet` of ``train_objects`` or

@@ -49,6 +49,7 @@ __all__ = [
     "make_pile_scene",
     "make_scene_of",
     "tilt",
+    "default_objects_per_scene",
 ]
 
 log = logging.getLogger(__name__)
@@ -66,6 +67,12 @@ PILE_BOX_HEIGHT = 0.12
 PILE_WALL = 0.01
 #: degrees: a packed object whose vertical axis leans more than this has tipped over.
 MAX_TILT = 15.0
+
+
+def default_objects_per_scene(kind: str, clutter: bool = False) -> int:
+    """Objects per scene when none is asked for: 5 in packed and pile scenes and in clutter
+    (declutter) rounds, as VGN and GIGA use, else 1 (Cornell-like)."""
+    return 5 if clutter or kind in ("packed", "pile") else 1
 
 
 def check_scene(kind: str, n_objects: int = 1) -> str:

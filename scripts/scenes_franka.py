@@ -62,7 +62,6 @@ def detector(name: str, model_path: Path, cfg, hand: str):
 def run_cell(row: str, name: str, n: int, out: Path, model_path: Path, cfg, executor) -> dict:
     from graspsim.declutter import run_rounds
     from graspsim.execution import ExecutionParams
-    from graspsim.gripper import hand_params
     from graspsim.trials import TrialConfig, run_trials
 
     hand = "franka" if row == "franka" else "builtin"
@@ -70,7 +69,7 @@ def run_cell(row: str, name: str, n: int, out: Path, model_path: Path, cfg, exec
     # Labels only where they are needed: the oracle proposes from them (the others' scenes,
     # camera and detector seeds do not depend on it).
     k = CANDIDATES if name == "oracle" else 0
-    params = ExecutionParams(gripper=hand_params(hand))
+    params = ExecutionParams.with_hand(hand)
     folder = out / row / name
     if row == "franka":
         s = run_trials(det, objects="test", n=n, seed=0, out=folder,

@@ -76,9 +76,11 @@ def add_scene_arg(p: argparse.ArgumentParser) -> None:
 def objects_per_scene(args: argparse.Namespace, clutter: bool = False) -> int:
     """``--objects-per-scene``, or its default: 5 for ``--scene packed|pile`` (and for
     ``clutter``, the declutter rounds), else 1."""
+    from graspsim.scenes import default_objects_per_scene
+
     k = args.objects_per_scene
     if k is None:
-        k = 5 if clutter or args.scene in ("packed", "pile") else 1
+        k = default_objects_per_scene(args.scene, clutter)
     if k < 1:
         raise ValueError(f"--objects-per-scene must be >= 1, got {k}")
     return k

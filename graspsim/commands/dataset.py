@@ -43,7 +43,6 @@ def register(subparsers) -> None:
 def _run(args: argparse.Namespace) -> int:
     from graspsim.datagen import make_dataset
     from graspsim.execution import ExecutionParams
-    from graspsim.gripper import hand_params
 
     k = objects_per_scene(args)
     s = make_dataset(n_scenes=args.scenes, objects=object_set_from_args(args), out=args.out,
@@ -51,7 +50,7 @@ def _run(args: argparse.Namespace) -> int:
                      n_candidates=args.candidates, n_objects=k,
                      sampler=args.sampler, profile=args.profile,
                      executor=executor_from_args(args), scene=args.scene,
-                     params=ExecutionParams(gripper=hand_params(args.gripper)))
+                     params=ExecutionParams.with_hand(args.gripper))
     print(f"wrote {s['images']} images ({s['positives']} positives, {s['negatives']} negatives) "
           f"to {args.out}; manifest {s['manifest']} (sha256 {s['fingerprint'][:12]}...)")
     return 0

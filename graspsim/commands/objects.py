@@ -38,12 +38,11 @@ def register(subparsers) -> None:
 def _run(args: argparse.Namespace) -> int:
     from graspsim.execution import ExecutionParams
     from graspsim.graspability import DEFAULT_POSES, object_table, object_table_text
-    from graspsim.gripper import hand_params
 
     rows = object_table(object_set_from_args(args),
                         DEFAULT_POSES if args.poses is None else args.poses,
                         measure=args.measure,
                         executor=executor_from_args(args) if args.measure else None,
-                        params=ExecutionParams(gripper=hand_params(args.gripper)))
+                        params=ExecutionParams.with_hand(args.gripper))
     print(json.dumps(rows, indent=1) if args.json else object_table_text(rows), end="\n")
     return 0

@@ -72,7 +72,6 @@ def register(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from graspsim.execution import ExecutionParams
-    from graspsim.gripper import hand_params
     from graspsim.trials import TrialConfig, run_trials
 
     k = objects_per_scene(args, clutter=args.declutter)
@@ -81,7 +80,7 @@ def _run(args: argparse.Namespace) -> int:
     config = TrialConfig(n_candidates=args.candidates, n_objects=k, sampler=args.sampler,
                          profile=args.profile, scene=args.scene)
     try:
-        params = ExecutionParams(min_grip=args.min_grip, gripper=hand_params(args.gripper))
+        params = ExecutionParams.with_hand(args.gripper, min_grip=args.min_grip)
     except ValueError as exc:
         raise ValueError(f"--min-grip: {exc}") from None
     executor = executor_from_args(args)
