@@ -15,8 +15,11 @@ Each command runs as a child process with ``--jobs`` workers. Per size and table
 ``/proc``) and ``stages``: worker seconds per stage, read from the commands' own records --
 Table 1: ``patches``, ``whitening``, ``dictionary`` (the representations), ``coding`` and
 ``svm_inner_cv``; Table 2: ``detection_per_image`` (mean seconds per test image) and
-``detection`` (their sum). ``growth`` gives, per table and stage, the exponent ``k`` of a
-least-squares fit of ``time = a * size^k`` over the sizes measured.
+``detection`` (their sum). ``rss_trace_mb`` is the peak memory in each tenth of the run's wall
+time (flat when nothing accumulates across cells and folds). ``growth`` gives, per table and
+stage, the exponent ``k`` of a least-squares fit of ``time = a * size^k`` over the sizes
+measured, and ``projected`` the fit's ``wall_s`` and ``cpu_s`` at Cornell's 885 images when that
+size was not measured (a projection, not a measurement).
 
 Finished commands are not run again (their output folders under ``--out`` are reused, and the
 benchmarks themselves resume at the cell and fold), so a killed run continues; a run's timing
@@ -40,8 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dlsr.records import write_json_atomic
-from graspsim.standin import CORNELL, make_cornell_standin, standin_subset
+from dlsr.records import read_json, write_json_atomic
+from graspsim.standin import CORNELL, standin_subset
 
 TABLE2_ROWS = (("NKM", "Natural"), ("NKM", "SC"), ("OMP", "Natural"), ("RP", "Natural"))
 
@@ -74,12 +77,12 @@ def timed(cmd: list[str]) -> dict:
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd)
-    peak = [0.0]
+    samples: list[tuple[float, float]] = []
     stop = threading.Event()
 
     def sample():
         while not stop.wait(0.2):
-            peak[0] = max(peak[0], _tree_rss_mb(proc.pid))
+            samples.append((time.perf_counter() - t0, _tree_rss_mb(proc.pid)))
 
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
@@ -91,7 +94,19 @@ def timed(cmd: list[str]) -> dict:
     if code != 0:
         raise SystemExit(f"bench_scale: {' '.join(cmd)} failed with exit code {code}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak[0], 1)}
+    peak = max((m for _, m in samples), default=0.0)
+    return {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak, 1),
+            "rss_trace_mb": rss_trace(samples, wall)}
+
+
+def rss_trace(samples, wall: float, n_bins: int = 10) -> list:
+    """The peak of ``samples`` (``(seconds, MiB)`` pairs) in each of ``n_bins`` equal parts of
+    ``wall`` seconds (None where a part has no sample)."""
+    bins: list = [None] * n_bins
+    for t, mb in samples:
+        i = min(int(n_bins * t / wall), n_bins - 1) if wall > 0 else 0
+        bins[i] = mb if bins[i] is None else max(bins[i], mb)
+    return [None if b is None else round(b, 1) for b in bins]
 
 
 def table1_stages(out: Path) -> dict:
@@ -139,6 +154,24 @@ def growth(rows: dict) -> dict:
     return out
 
 
+def projected(rows: dict, size: int = CORNELL["images"]) -> dict:
+    """Per table, ``wall_s`` and ``cpu_s`` at ``size`` images from the power law fitted to the
+    sizes measured (empty for a table measured at ``size`` or at fewer than two sizes)."""
+    out: dict = {}
+    for table in ("table1", "table2"):
+        have = sorted(int(s) for s in rows if table in rows[s])
+        if len(have) < 2 or size in have:
+            continue
+        x = np.log(have)
+        fit = {}
+        for name in ("wall_s", "cpu_s"):
+            y = np.log([rows[str(s)][table][name] for s in have])
+            k, log_a = np.polyfit(x, y, 1)
+            fit[name] = round(float(np.exp(log_a + k * np.log(size))), 1)
+        out[table] = {"images": size, **fit}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="100,300,885")
@@ -155,10 +188,15 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     biggest = max(sizes)
     scale = biggest / CORNELL["images"]
-    made = make_cornell_standin(
-        standin, n_images=biggest, positives=round(CORNELL["positives"] * scale),
-        negatives=round(CORNELL["negatives"] * scale), seed=args.seed, n_jobs=args.jobs,
-        progress=True)
+    # In a child process: checking the labelled scenes loads all of them (2.5 GB at 885
+    # images), which this process would otherwise hold for the whole benchmark.
+    subprocess.run([sys.executable, str(Path(__file__).with_name("make_cornell_standin.py")),
+                    "--out", str(standin), "--images", str(biggest),
+                    "--positives", str(round(CORNELL["positives"] * scale)),
+                    "--negatives", str(round(CORNELL["negatives"] * scale)),
+                    "--seed", str(args.seed), "--jobs", str(args.jobs)],
+                   check=True, stdout=subprocess.DEVNULL)
+    made = read_json(standin / "standin.json", "stand-in record")
     timings_path = out / "timings.json"
     timings = json.loads(timings_path.read_text()) if timings_path.exists() else {}
     graspsim = [sys.executable, "-m", "graspsim.cli"]
@@ -176,7 +214,7 @@ def main(argv=None) -> int:
             write_json_atomic(timings_path, timings, indent=1)
         if "2" in tables and "table2" not in row:
             total = {"wall_s": 0.0, "cpu_s": 0.0, "peak_rss_mb": 0.0}
-            dests = []
+            dests, traces = [], []
             for learner, encoder in TABLE2_ROWS:
                 for split in ("image", "object"):
                     dest = out / f"table2_{size}_{learner}-{encoder}_{split}"
@@ -187,14 +225,16 @@ def main(argv=None) -> int:
                     total["wall_s"] += t["wall_s"]
                     total["cpu_s"] += t["cpu_s"]
                     total["peak_rss_mb"] = max(total["peak_rss_mb"], t["peak_rss_mb"])
+                    traces.append(t["rss_trace_mb"])
                     dests.append(dest)
             row["table2"] = {**{k: round(v, 2) for k, v in total.items()},
-                             "stages": table2_stages(dests)}
+                             "rss_trace_mb": traces, "stages": table2_stages(dests)}
             write_json_atomic(timings_path, timings, indent=1)
     result = {"machine": {"cpus": os.cpu_count(), "jobs": args.jobs,
                           "platform": sys.platform},
               "standin": made["reached"], "sizes": {s: timings[str(s)] for s in map(str, sizes)},
-              "growth": growth({s: timings[s] for s in map(str, sizes)})}
+              "growth": growth({s: timings[s] for s in map(str, sizes)}),
+              "projected": projected({s: timings[s] for s in map(str, sizes)})}
     print(json.dumps(result, indent=1))
     return 0
 

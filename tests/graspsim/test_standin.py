@@ -89,3 +89,46 @@ def test_a_tiny_standin_has_the_counts_it_records(tmp_path):
     assert [s.object_id for s in first] == [s.object_id for s in samples[:2]]
     with pytest.raises(ValueError, match="fewer than"):
         standin_subset(tmp_path / "cornell", tmp_path / "sub", 4)
+
+
+def _bench_scale():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "bench_scale.py"
+    spec = importlib.util.spec_from_file_location("bench_scale", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_bench_scale_fits_the_growth_exponent_and_projects_to_cornell():
+    bench = _bench_scale()
+
+    def row(n):  # table 1 quadratic in size, its coding linear; table 2 linear
+        return {"table1": {"wall_s": 0.01 * n**2, "cpu_s": 0.02 * n**2,
+                           "stages": {"coding": 3.0 * n, "svm_inner_cv": 0.0}},
+                "table2": {"wall_s": 5.0 * n, "cpu_s": 9.0 * n, "stages": {"detection": n}}}
+
+    rows = {str(n): row(n) for n in (30, 100)}
+    k = bench.growth(rows)
+    assert k["table1"]["wall_s"] == pytest.approx(2.0)
+    assert k["table1"]["coding"] == pytest.approx(1.0)
+    assert "svm_inner_cv" not in k["table1"]  # a stage that took no time has no exponent
+    assert k["table2"]["detection"] == pytest.approx(1.0)
+    proj = bench.projected(rows)
+    assert proj["table1"]["images"] == CORNELL["images"] == 885
+    assert proj["table1"]["wall_s"] == pytest.approx(0.01 * 885**2, rel=1e-3)
+    assert proj["table2"]["cpu_s"] == pytest.approx(9.0 * 885, rel=1e-3)
+    # measured at Cornell's size, or at one size only: nothing is projected
+    assert bench.projected({**rows, "885": row(885)}) == {}
+    assert bench.projected({"100": row(100)}) == {}
+    assert bench.growth({"100": row(100)}) == {}
+
+
+def test_bench_scale_memory_trace_keeps_each_part_of_the_run_peak():
+    bench = _bench_scale()
+    samples = [(0.1, 100.0), (0.5, 120.0), (4.0, 300.0), (9.9, 110.0)]
+    trace = bench.rss_trace(samples, wall=10.0, n_bins=5)
+    assert trace == [120.0, None, 300.0, None, 110.0]
+    assert bench.rss_trace([], wall=0.0, n_bins=2) == [None, None]
