@@ -21,6 +21,11 @@ stage, the exponent ``k`` of a least-squares fit of ``time = a * size^k`` over t
 measured, and ``projected`` the fit's ``wall_s`` and ``cpu_s`` at Cornell's 885 images when that
 size was not measured (a projection, not a measurement).
 
+The stand-in is always Cornell's size (``--standin-images``), so a size means the same
+images whichever sizes a run asks for; each size's record names its data (``data``: the
+stand-in's labelled scenes and the sha256 of the subset's rectangles), and a size measured on
+other data is measured again.
+
 Finished commands are not run again (their output folders under ``--out`` are reused, and the
 benchmarks themselves resume at the cell and fold), so a killed run continues; a run's timing
 is kept in ``OUT/timings.json`` as soon as it finishes.
@@ -32,9 +37,11 @@ Usage: python scripts/bench_scale.py --sizes 100,300,885 [--jobs 2] [--standin r
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import threading
@@ -109,6 +116,18 @@ def rss_trace(samples, wall: float, n_bins: int = 10) -> list:
     return [None if b is None else round(b, 1) for b in bins]
 
 
+def data_fingerprint(data: Path, made: dict) -> dict:
+    """What a size was measured on: its images, the stand-in they come from (its size and
+    labelled scenes) and the sha256 of the subset's rectangle files (the thinning)."""
+    h = hashlib.sha256()
+    for f in sorted(data.glob("*/pcd*c[pn]*.txt")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return {"images": sum(1 for _ in data.glob("*/pcd*r.png")),
+            "standin_images": made["reached"]["images"],
+            "standin_labelled": made["labelled_fingerprint"], "rectangles": h.hexdigest()}
+
+
 def table1_stages(out: Path) -> dict:
     rec = json.loads((out / "recognition.json").read_text())
     stages = {"patches": 0.0, "whitening": 0.0, "dictionary": 0.0, "coding": 0.0,
@@ -179,6 +198,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--standin", default="runs/standin", help="stand-in folder (made or reused)")
     ap.add_argument("--out", default="runs/bench_scale")
+    ap.add_argument("--standin-images", type=int, default=CORNELL["images"],
+                    help="the stand-in's size; every size measured is its first images")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     sizes = sorted({int(s) for s in args.sizes.split(",")})
@@ -186,23 +207,34 @@ def main(argv=None) -> int:
     standin = Path(args.standin)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    biggest = max(sizes)
-    scale = biggest / CORNELL["images"]
+    n_standin = max(args.standin_images, max(sizes))
+    scale = n_standin / CORNELL["images"]
     # In a child process: checking the labelled scenes loads all of them (2.5 GB at 885
     # images), which this process would otherwise hold for the whole benchmark.
     subprocess.run([sys.executable, str(Path(__file__).with_name("make_cornell_standin.py")),
-                    "--out", str(standin), "--images", str(biggest),
+                    "--out", str(standin), "--images", str(n_standin),
                     "--positives", str(round(CORNELL["positives"] * scale)),
                     "--negatives", str(round(CORNELL["negatives"] * scale)),
                     "--seed", str(args.seed), "--jobs", str(args.jobs)],
                    check=True, stdout=subprocess.DEVNULL)
     made = read_json(standin / "standin.json", "stand-in record")
     timings_path = out / "timings.json"
-    timings = json.loads(timings_path.read_text()) if timings_path.exists() else {}
+    timings = read_json(timings_path, "timings") if timings_path.exists() else {}
     graspsim = [sys.executable, "-m", "graspsim.cli"]
     for size in sizes:
         data = standin_subset(standin / "cornell", out / f"data_{size}", size)
+        which = data_fingerprint(data, made)
         row = timings.setdefault(str(size), {})
+        if row.get("data") != which:
+            # measured on other data (another stand-in, or another thinning of it): measured
+            # again, and the benchmarks' folders removed, as they would resume from them
+            if row:
+                print(f"bench_scale: size {size} was measured on other data; measuring again",
+                      file=sys.stderr)
+            for old in out.glob(f"table[12]_{size}*"):
+                shutil.rmtree(old)
+            row.clear()
+            row["data"] = which
         common = ["--data", str(data), "--format", "cornell", "--jobs", str(args.jobs),
                   "--seed", str(args.seed)]
         if "1" in tables and "table1" not in row:

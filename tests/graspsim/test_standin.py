@@ -132,3 +132,21 @@ def test_bench_scale_memory_trace_keeps_each_part_of_the_run_peak():
     trace = bench.rss_trace(samples, wall=10.0, n_bins=5)
     assert trace == [120.0, None, 300.0, None, 110.0]
     assert bench.rss_trace([], wall=0.0, n_bins=2) == [None, None]
+
+
+def test_bench_scale_names_the_data_each_size_was_measured_on(tmp_path):
+    bench = _bench_scale()
+    folder = tmp_path / "00"
+    folder.mkdir()
+    for i in range(2):
+        (folder / f"pcd{i:04d}r.png").write_bytes(b"png")
+        (folder / f"pcd{i:04d}cpos.txt").write_text("1 2\n3 4\n5 6\n7 8\n")
+        (folder / f"pcd{i:04d}cneg.txt").write_text("")
+    made = {"reached": {"images": 885}, "labelled_fingerprint": "abc"}
+    first = bench.data_fingerprint(tmp_path, made)
+    assert first["images"] == 2 and first["standin_images"] == 885
+    assert bench.data_fingerprint(tmp_path, made) == first
+    (folder / "pcd0001cneg.txt").write_text("1 2\n3 4\n5 6\n7 8\n")  # another thinning
+    assert bench.data_fingerprint(tmp_path, made)["rectangles"] != first["rectangles"]
+    other = {"reached": {"images": 100}, "labelled_fingerprint": "abc"}  # another stand-in
+    assert bench.data_fingerprint(tmp_path, other) != first
