@@ -30,7 +30,13 @@ from dlsr.records import read_json, write_text_atomic
 
 log = logging.getLogger(__name__)
 
-__all__ = ["data_efficiency", "curve_markdown", "curve_figure"]
+__all__ = ["data_efficiency", "equal_time_model", "catch_up", "curve_markdown",
+           "curve_figure"]
+
+#: GG-CNN's rows at every size: the budget chosen on validation scenes, and the model trained
+#: for as long as DLSR's default took to train (equal training wall time), raw and
+#: gripper-aware.
+GGCNN_ROWS = ("ggcnn", "ggcnn+aware", "ggcnn@dlsr-time", "ggcnn+aware@dlsr-time")
 
 
 def _rect_accuracy(det, samples) -> dict:
@@ -44,6 +50,44 @@ def _rect_accuracy(det, samples) -> dict:
         rects, _ = check_detections(det.predict(dict(sample_observation(s), seed=0)))
         ok.append(bool(rects) and bool(rectangle_metric(rects[0], s.positives)))
     return {"correct": int(sum(ok)), "n": len(ok)}
+
+
+def equal_time_model(gpath, seconds: float, samples, seed: int, device: str = "cpu",
+                     progress: bool = True):
+    """GG-CNN trained for ``seconds`` of wall time: the snapshot the full run saved then
+    (``snapshot_seconds``), else, when the full run took no longer, the full model, else a
+    model trained for the sample-steps that fit at the full run's rate (same seed and batches:
+    the full run's weights at that step). Returns its path.
+
+    Parameters
+    ----------
+    gpath : Path
+        The full run's ``MODEL``.
+    seconds : float
+        The training wall time to match (DLSR's).
+    samples, seed, device, progress :
+        As the full run (:func:`graspsim.ggcnn.train.train_ggcnn`), for the fallback.
+    """
+    from .model import model_paths
+    from .train import train_ggcnn
+
+    snap = gpath.with_name(f"{gpath.name}_time{round(seconds)}s")
+    if model_paths(snap)[1].is_file():
+        taken = json.loads(model_paths(snap)[1].read_text())["training"]
+        if taken.get("snapshot_seconds") == round(seconds, 2):
+            return snap
+    full = json.loads(model_paths(gpath)[1].read_text())["training"]
+    if full["seconds"] <= seconds:
+        return gpath
+    rate = full["seconds"] / full["sample_steps"]
+    batch = int(full["batch_size"])
+    steps = max(batch, int(seconds / rate) // batch * batch)
+    epath = gpath.with_name(f"{gpath.name}_eq{steps}")
+    if not model_paths(epath)[1].is_file():
+        log.info("GG-CNN: %s has no snapshot at %.0f s; training %d sample-steps", gpath,
+                 seconds, steps)
+        train_ggcnn(samples, epath, steps=steps, seed=seed, device=device, progress=progress)
+    return epath
 
 
 def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 20000),
@@ -142,9 +186,11 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
             models[name] = (gripper_aware(det) if name == "dlsr" else det,
                             read_json(timing, "timing")["seconds"])
         gpath = out / "models" / f"ggcnn_{n}"
+        dlsr_seconds = models["dlsr"][1]
         if not model_paths(gpath)[1].is_file():
             train_ggcnn(samples, gpath, steps=budgets[-1], seed=s_model, device=device,
-                        snapshots=budgets[:-1], progress=progress)
+                        snapshots=budgets[:-1], snapshot_seconds=[dlsr_seconds],
+                        progress=progress)
         val = result["validation"].setdefault(key, {})
         for b in budgets:
             bpath = gpath if b == budgets[-1] else gpath.with_name(f"{gpath.name}_step{b}")
@@ -159,9 +205,22 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
         g = GGCNNDetector(bpath, device=device)
         models["ggcnn"] = (g, meta["training"]["seconds"])
         models["ggcnn+aware"] = (gripper_aware(g), meta["training"]["seconds"])
+        epath = equal_time_model(gpath, dlsr_seconds, samples, seed=s_model, device=device,
+                                 progress=progress)
+        emeta = json.loads(model_paths(epath)[1].read_text())
+        e = GGCNNDetector(epath, device=device)
+        models["ggcnn@dlsr-time"] = (e, emeta["training"]["seconds"])
+        models["ggcnn+aware@dlsr-time"] = (gripper_aware(e), emeta["training"]["seconds"])
+        steps_of = {"ggcnn": meta["training"]["sample_steps"],
+                    "ggcnn@dlsr-time": emeta["training"]["sample_steps"]}
+        # the same model twice (equal time reached the chosen budget): its trials once
+        same = ({"ggcnn@dlsr-time": "ggcnn", "ggcnn+aware@dlsr-time": "ggcnn+aware"}
+                if epath == bpath else {})
         outcomes = {}
         for name, (det, train_s) in models.items():
-            t = trials(det, name, out / "trials" / f"{name}_{n}", "test", test_trials, s_test)
+            tname = same.get(name, name)
+            t = trials(det, tname, out / "trials" / f"{tname}_{n}", "test", test_trials,
+                       s_test)
             outcomes[name] = [bool(r["success"]) for r in sorted(t["records"],
                                                                  key=lambda r: r["index"])]
             lo, hi = wilson_interval(t["successes"], t["n"])
@@ -172,19 +231,67 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
             if "rect" not in row:  # the gripper check needs the camera pose: ranking alone
                 row["rect"] = _rect_accuracy(getattr(det, "detector", det), heldout)
             if name.startswith("ggcnn"):
-                row["budget"] = best
+                row["budget"] = steps_of[name.replace("+aware", "")]
             write_text_atomic(path, json.dumps(result, indent=2))
         result["comparisons"][key] = {
             f"{a} vs {b}": compare_outcomes(outcomes[a], outcomes[b], names=(a, b))
-            for a in ("dlsr", "dlsr-paper") for b in ("ggcnn", "ggcnn+aware")}
+            for a in ("dlsr", "dlsr-paper") for b in GGCNN_ROWS}
         write_text_atomic(path, json.dumps(result, indent=2, default=float))
         write_text_atomic(out / "curve.md", curve_markdown(result))
         curve_figure(result, out / "curve.png")
     return result
 
 
+def catch_up(result: dict, dlsr: str = "dlsr", ggcnn: str = "ggcnn+aware",
+             alpha: float = 0.05) -> dict:
+    """Where GG-CNN catches up with DLSR along the curve, for one pair fixed beforehand.
+
+    The default pair is DLSR's default (gripper-aware) against GG-CNN gripper-aware at the
+    budget chosen on validation scenes: both filtered by the same gripper check, and chosen
+    before the test trials (taking the better of GG-CNN's forms per size would choose on the
+    test scenes).
+
+    Returns
+    -------
+    dict
+        ``sizes`` measured (ascending); ``level``: the first size at which GG-CNN succeeds at
+        least as often as DLSR (None if none); ``not_separated``: the first size from which on
+        DLSR is never better at level ``alpha`` (exact McNemar; None if it is at the last);
+        ``sentence``: the answer in words.
+    """
+    sizes = sorted((int(k) for k, r in result.get("rows", {}).items()
+                    if "n" in r.get(dlsr, {}) and "n" in r.get(ggcnn, {})))
+    level = next((n for n in sizes if result["rows"][str(n)][ggcnn]["successes"]
+                  >= result["rows"][str(n)][dlsr]["successes"]), None)
+
+    def dlsr_better(n):
+        c = result.get("comparisons", {}).get(str(n), {}).get(f"{dlsr} vs {ggcnn}")
+        return c is None or (c["mcnemar_p"] < alpha
+                             and c["counts"]["only_a"] > c["counts"]["only_b"])
+
+    not_sep = None
+    for n in reversed(sizes):
+        if dlsr_better(n):
+            break
+        not_sep = n
+    if not sizes:
+        sentence = "no size measured yet"
+    elif level is not None:
+        sentence = (f"{ggcnn} catches up with {dlsr} at {level} training scenes (as many "
+                    f"successes on the same test scenes)")
+    elif not_sep is not None:
+        sentence = (f"{ggcnn} stays below {dlsr} up to {sizes[-1]} scenes, but from "
+                    f"{not_sep} scenes on the two are not separated (exact McNemar, "
+                    f"p >= {alpha:g})")
+    else:
+        sentence = (f"{ggcnn} does not catch up with {dlsr} up to {sizes[-1]} training "
+                    f"scenes: {dlsr} is better at every size measured")
+    return {"sizes": sizes, "level": level, "not_separated": not_sep, "sentence": sentence}
+
+
 def curve_markdown(result: dict) -> str:
-    """The table of :func:`data_efficiency` (Markdown): one row per size and detector."""
+    """The table of :func:`data_efficiency` (Markdown): one row per size and detector, the
+    paired comparisons, GG-CNN's validation curve and :func:`catch_up`'s answer."""
     lines = ["| training scenes | detector | success | 95 % CI (Wilson) | rectangle metric "
              "(held-out images) | training s | planning s/grasp | GG-CNN budget |",
              "|---|---|---|---|---|---|---|---|"]
@@ -216,6 +323,7 @@ def curve_markdown(result: dict) -> str:
         lines.append(f"| {key} | " + " | ".join(
             f"{v[str(b)]['successes']}/{v[str(b)]['n']}" if str(b) in v else ""
             for b in result["config"]["budgets"]) + " |")
+    lines += ["", f"Catching up: {catch_up(result)['sentence']}."]
     return "\n".join(lines) + "\n"
 
 
@@ -238,8 +346,8 @@ def curve_figure(result: dict, path) -> None:
         lo = np.array([p[1]["ci95"][0] for p in pts])
         hi = np.array([p[1]["ci95"][1] for p in pts])
         err = 100 * np.clip([y - lo, hi - y], 0, None)
-        ax.errorbar(x, 100 * y, yerr=err, marker="o", capsize=3,
-                    label=name)
+        ax.errorbar(x, 100 * y, yerr=err, marker="o", capsize=3, label=name,
+                    linestyle="--" if name.endswith("@dlsr-time") else "-")
     ax.set_xscale("log")
     ax.set_xlabel("training scenes (train objects)")
     ax.set_ylabel("physical success on test objects (%)")

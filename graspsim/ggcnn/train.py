@@ -17,6 +17,7 @@ import time
 
 import numpy as np
 
+from dlsr._memory import reused_heap
 from dlsr.records import read_json, write_text_atomic
 from dlsr.rectangles import normalize_angle, rects_to_array
 
@@ -133,8 +134,8 @@ def _batch(X, R, rng, batch_size, input_size, do_augment):
 def train_ggcnn(samples, out, steps: int = 20_000, seed: int = 0, device: str = "cpu",
                 batch_size: int = 8, lr: float = 1e-3, crop: int = 300, input_size: int = 300,
                 crop_method: str = "object", filters=FILTERS, do_augment: bool = True,
-                checkpoint_every: int = 1000, snapshots=(), threads: int = 2,
-                progress: bool = True) -> dict:
+                checkpoint_every: int = 1000, snapshots=(), snapshot_seconds=(),
+                threads: int = 2, progress: bool = True) -> dict:
     """Train GG-CNN on labelled images and save it as ``out`` (``.pt`` + ``.json``).
 
     Parameters
@@ -163,6 +164,12 @@ def train_ggcnn(samples, out, steps: int = 20_000, seed: int = 0, device: str = 
     snapshots : sequence of int
         Sample-steps at which the model is also saved as ``MODEL_stepN`` (for choosing the
         budget on validation scenes).
+    snapshot_seconds : sequence of float
+        Training seconds at which the model is also saved, as ``MODEL_timeTs`` (``T`` rounded
+        to whole seconds; its record's ``training.snapshot_seconds`` is ``T``), at the end of
+        the first batch that reaches them: another detector's training time, for a comparison
+        at equal training wall time. A time already passed when a run resumes, or never
+        reached, gives no file.
     threads : int
         torch threads during training.
     progress : bool
@@ -197,75 +204,85 @@ def train_ggcnn(samples, out, steps: int = 20_000, seed: int = 0, device: str = 
     threads_before = torch.get_num_threads()
     torch.use_deterministic_algorithms(True)
     torch.set_num_threads(int(threads))
+    # every batch allocates and frees ~100 MB of activations in blocks above glibc's mmap
+    # threshold: kept on the heap, a sample-step costs 110-120 ms instead of 245 ms on 2 cores
+    # (42 % of the CPU time was page faults; scripts/bench_ggcnn.py, dlsr._memory)
     try:
-        with torch.random.fork_rng(devices=[] if device == "cpu" else None):
-            torch.manual_seed(int(seed))
-            net = build_network(filters).to(device)
-        opt = torch.optim.Adam(net.parameters(), lr=lr)
-        done, seconds, losses = 0, 0.0, []
-        if ck_js.is_file() and ck_pt.is_file():
-            info = read_json(ck_js, "GG-CNN checkpoint")
-            if info.get("options") == options and info.get("batches", 0) <= n_batches:
-                state = torch.load(ck_pt, map_location=device, weights_only=True)
-                net.load_state_dict(state["model"])
-                opt.load_state_dict(state["optim"])
-                done, seconds = int(info["batches"]), float(info["seconds"])
-                losses = list(info.get("losses", []))
-                log.info("GG-CNN: resumed from %s at %d sample-steps", ck_pt, done * batch_size)
-            else:
-                log.info("GG-CNN: checkpoint %s is of other data or options: starting afresh",
-                         ck_pt)
-        snaps = sorted({-(-int(s) // batch_size) for s in snapshots if 0 < s <= steps})
+        with reused_heap():
+            with torch.random.fork_rng(devices=[] if device == "cpu" else None):
+                torch.manual_seed(int(seed))
+                net = build_network(filters).to(device)
+            opt = torch.optim.Adam(net.parameters(), lr=lr)
+            done, seconds, losses = 0, 0.0, []
+            if ck_js.is_file() and ck_pt.is_file():
+                info = read_json(ck_js, "GG-CNN checkpoint")
+                if info.get("options") == options and info.get("batches", 0) <= n_batches:
+                    state = torch.load(ck_pt, map_location=device, weights_only=True)
+                    net.load_state_dict(state["model"])
+                    opt.load_state_dict(state["optim"])
+                    done, seconds = int(info["batches"]), float(info["seconds"])
+                    losses = list(info.get("losses", []))
+                    log.info("GG-CNN: resumed from %s at %d sample-steps", ck_pt, done * batch_size)
+                else:
+                    log.info("GG-CNN: checkpoint %s is of other data or options: starting afresh",
+                             ck_pt)
+            snaps = sorted({-(-int(s) // batch_size) for s in snapshots if 0 < s <= steps})
+            timed = sorted(float(t) for t in snapshot_seconds if float(t) > seconds)
 
-        def checkpoint(b):
-            tmp = ck_pt.with_name(ck_pt.name + ".tmp")
-            torch.save({"model": net.state_dict(), "optim": opt.state_dict()}, tmp)
-            tmp.replace(ck_pt)
-            write_text_atomic(ck_js, json.dumps({"options": options, "batches": b,
-                                                 "seconds": seconds, "losses": losses}))
+            def checkpoint(b):
+                tmp = ck_pt.with_name(ck_pt.name + ".tmp")
+                torch.save({"model": net.state_dict(), "optim": opt.state_dict()}, tmp)
+                tmp.replace(ck_pt)
+                write_text_atomic(ck_js, json.dumps({"options": options, "batches": b,
+                                                     "seconds": seconds, "losses": losses}))
 
-        def record(b):
-            return {"crop": int(crop), "input_size": int(input_size),
-                    "crop_method": crop_method, "filters": [int(f) for f in filters],
-                    "sigma": 2.0, "width_scale": WIDTH_SCALE,
-                    "training": {**options, "sample_steps": b * batch_size,
-                                 "seconds": round(seconds, 2),
-                                 "loss": losses[-1][1] if losses else None,
-                                 "torch": torch.__version__}}
+            def record(b):
+                return {"crop": int(crop), "input_size": int(input_size),
+                        "crop_method": crop_method, "filters": [int(f) for f in filters],
+                        "sigma": 2.0, "width_scale": WIDTH_SCALE,
+                        "training": {**options, "sample_steps": b * batch_size,
+                                     "seconds": round(seconds, 2),
+                                     "loss": losses[-1][1] if losses else None,
+                                     "torch": torch.__version__}}
 
-        net.train()
-        every = max(1, int(checkpoint_every) // batch_size)
-        bar = tqdm(total=n_batches * batch_size, initial=done * batch_size, desc="GG-CNN",
-                   unit="sample", disable=not progress)
-        running, window = None, []
-        for b in range(done, n_batches):
-            t0 = time.perf_counter()
-            rng = np.random.default_rng([int(seed), b])
-            xb, yb = _batch(X, R, rng, batch_size, input_size, do_augment)
-            xt = torch.from_numpy(xb).to(device)
-            yt = torch.from_numpy(yb).to(device)
-            pred = net(xt)
-            loss = sum(torch.nn.functional.mse_loss(pred[:, k], yt[:, k]) for k in range(4))
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            window.append(float(loss.detach()))
-            running = float(np.mean(window[-every:]))
-            seconds += time.perf_counter() - t0
-            if (b + 1) % every == 0 or b + 1 == n_batches:
-                losses.append([(b + 1) * batch_size, round(float(np.mean(window)), 6)])
-                window = []
-                checkpoint(b + 1)
-            if b + 1 in snaps:
-                save_model(net, pt.with_name(f"{pt.stem}_step{(b + 1) * batch_size}"),
-                           record(b + 1))
-            bar.set_postfix(loss=f"{running:.4f}")
-            bar.update(batch_size)
-        bar.close()
-        meta = record(n_batches)
-        meta["training"]["loss_curve"] = losses
-        net.eval()
-        save_model(net, out, meta)
+            net.train()
+            every = max(1, int(checkpoint_every) // batch_size)
+            bar = tqdm(total=n_batches * batch_size, initial=done * batch_size, desc="GG-CNN",
+                       unit="sample", disable=not progress)
+            running, window = None, []
+            for b in range(done, n_batches):
+                t0 = time.perf_counter()
+                rng = np.random.default_rng([int(seed), b])
+                xb, yb = _batch(X, R, rng, batch_size, input_size, do_augment)
+                xt = torch.from_numpy(xb).to(device)
+                yt = torch.from_numpy(yb).to(device)
+                pred = net(xt)
+                loss = sum(torch.nn.functional.mse_loss(pred[:, k], yt[:, k]) for k in range(4))
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                window.append(float(loss.detach()))
+                running = float(np.mean(window[-every:]))
+                seconds += time.perf_counter() - t0
+                if (b + 1) % every == 0 or b + 1 == n_batches:
+                    losses.append([(b + 1) * batch_size, round(float(np.mean(window)), 6)])
+                    window = []
+                    checkpoint(b + 1)
+                while timed and seconds >= timed[0]:
+                    target = timed.pop(0)
+                    rec = record(b + 1)
+                    rec["training"]["snapshot_seconds"] = round(target, 2)
+                    save_model(net, pt.with_name(f"{pt.stem}_time{round(target)}s"), rec)
+                if b + 1 in snaps:
+                    save_model(net, pt.with_name(f"{pt.stem}_step{(b + 1) * batch_size}"),
+                               record(b + 1))
+                bar.set_postfix(loss=f"{running:.4f}")
+                bar.update(batch_size)
+            bar.close()
+            meta = record(n_batches)
+            meta["training"]["loss_curve"] = losses
+            net.eval()
+            save_model(net, out, meta)
     finally:
         torch.use_deterministic_algorithms(det_before)
         torch.set_num_threads(threads_before)

@@ -270,6 +270,7 @@ def test_curve_table_and_figure(tmp_path):
     assert "| 10 | dlsr | 3/4 | 30.0-95.0 % | 2/5 | 12 | 0.50 |  |" in md
     assert "| 10 | ggcnn | 1/4 |" in md and "| 10 | dlsr vs ggcnn | 2 | 0 | 0.5 |" in md
     assert "| 10 | 2/5 |  |" in md
+    assert "Catching up: no size measured yet." in md  # no ggcnn+aware row here
     curve_figure(result, tmp_path / "c.png")
     assert (tmp_path / "c.png").stat().st_size > 1000
 
@@ -291,3 +292,58 @@ def test_perfect_maps_decode_to_the_labelled_rectangle_in_image_pixels(trained):
     assert np.hypot(got[0] - truth.x, got[1] - truth.y) < 1.5
     assert abs((got[2] - truth.theta + np.pi / 2) % np.pi - np.pi / 2) < 1e-6
     assert got[3] == pytest.approx(truth.w, rel=1e-4)
+
+
+def test_timed_snapshot_is_the_run_at_that_step_and_equal_time_falls_back(tmp_path):
+    from graspsim.ggcnn.curve import equal_time_model
+
+    full = tmp_path / "full"
+    meta = train_ggcnn(tiny_samples(), full, steps=96, seed=5, checkpoint_every=32,
+                       snapshot_seconds=[1e-9, 1e9], **TINY)
+    snap = tmp_path / "full_time0s"
+    assert model_paths(snap)[1].is_file()  # reached at the first batch
+    assert not model_paths(tmp_path / "full_time1000000000s")[1].is_file()  # never reached
+    smeta = json.loads(model_paths(snap)[1].read_text())["training"]
+    assert smeta["sample_steps"] == 8 and smeta["seconds"] <= meta["training"]["seconds"]
+    # the snapshot is what a run stopped at that step gives (same seed and batches)
+    alone = tmp_path / "alone"
+    train_ggcnn(tiny_samples(), alone, steps=8, seed=5, checkpoint_every=32, **TINY)
+    a = torch.load(model_paths(alone)[0], weights_only=True)
+    b = torch.load(model_paths(snap)[0], weights_only=True)
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    # equal time: the snapshot when there is one, the full model when it took no longer ...
+    assert equal_time_model(full, 1e-9, tiny_samples(), seed=5) == snap
+    assert equal_time_model(full, 1e9, tiny_samples(), seed=5) == full
+    # ... else the sample-steps that fit at the full run's rate, trained with its seed
+    half = meta["training"]["seconds"] / 2
+    eq = equal_time_model(full, half, tiny_samples(), seed=5, progress=False)
+    steps = json.loads(model_paths(eq)[1].read_text())["training"]["sample_steps"]
+    assert eq.name.startswith("full_eq") and 8 <= steps < 96 and steps % 8 == 0
+
+
+def _curve_result(dlsr, gg, p, only=(5, 1)):
+    def row(k):
+        return {"successes": k, "n": 20, "ci95": [0.1, 0.9], "train_seconds": 1.0}
+
+    return {"config": {"budgets": [80]},
+            "rows": {str(n): {"dlsr": row(a), "ggcnn+aware": row(b)}
+                     for n, a, b in zip((10, 30, 100), dlsr, gg, strict=False)},
+            "validation": {},
+            "comparisons": {str(n): {"dlsr vs ggcnn+aware": {
+                "counts": {"only_a": only[0], "only_b": only[1]}, "mcnemar_p": q}}
+                for n, q in zip((10, 30, 100), p, strict=False)}}
+
+
+def test_catch_up_reads_the_fixed_pair_along_the_curve():
+    from graspsim.ggcnn.curve import catch_up
+
+    c = catch_up(_curve_result((15, 16, 17), (5, 12, 17), (0.001, 0.2, 1.0)))
+    assert c["sizes"] == [10, 30, 100] and c["level"] == 100 and c["not_separated"] == 30
+    assert "catches up" in c["sentence"] and "100" in c["sentence"]
+    c = catch_up(_curve_result((15, 16, 17), (5, 6, 14), (0.001, 0.01, 0.3)))
+    assert c["level"] is None and c["not_separated"] == 100
+    assert "not separated" in c["sentence"]
+    c = catch_up(_curve_result((15, 16, 17), (5, 6, 7), (0.001, 0.3, 0.01)))
+    assert c["level"] is None and c["not_separated"] is None
+    assert "does not catch up" in c["sentence"]
+    assert catch_up({"rows": {}})["sentence"] == "no size measured yet"
