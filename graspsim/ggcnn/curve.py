@@ -11,8 +11,10 @@ on its first ``n`` scenes for every ``n`` of ``sizes`` (nested subsets, smallest
   smaller budget), which gives the validation curve.
 
 Every chosen model then runs on the same ``test_trials`` scenes of the test objects (same
-seed), GG-CNN raw and gripper-aware; DLSR is compared with GG-CNN scene by scene (exact
-McNemar), and the rectangle metric is measured on held-out labelled images of the test objects.
+seed), GG-CNN raw and gripper-aware, both also at DLSR's training wall time
+(:func:`equal_time_model`), beside mask-pca (no training; its trials once); DLSR is compared
+with GG-CNN scene by scene (exact McNemar), and the rectangle metric is measured on held-out
+labelled images of the test objects.
 Everything is written as it is finished and a rerun resumes (datasets per scene, trials per
 trial, models per file, GG-CNN training from its checkpoint).
 """
@@ -133,7 +135,7 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
 
     from ..compare import compare_outcomes
     from ..datagen import make_dataset
-    from ..detectors import gripper_aware
+    from ..detectors import gripper_aware, load_detector
     from ..executor import Executor, task_seeds
     from ..trials import TrialConfig, run_trials, wilson_interval
     from .detector import GGCNNDetector
@@ -216,11 +218,12 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
         # the same model twice (equal time reached the chosen budget): its trials once
         same = ({"ggcnn@dlsr-time": "ggcnn", "ggcnn+aware@dlsr-time": "ggcnn+aware"}
                 if epath == bpath else {})
+        models["mask-pca"] = (load_detector("mask-pca"), 0.0)  # trains on nothing: same trials
         outcomes = {}
         for name, (det, train_s) in models.items():
             tname = same.get(name, name)
-            t = trials(det, tname, out / "trials" / f"{tname}_{n}", "test", test_trials,
-                       s_test)
+            folder = out / "trials" / (tname if name == "mask-pca" else f"{tname}_{n}")
+            t = trials(det, tname, folder, "test", test_trials, s_test)
             outcomes[name] = [bool(r["success"]) for r in sorted(t["records"],
                                                                  key=lambda r: r["index"])]
             lo, hi = wilson_interval(t["successes"], t["n"])
@@ -236,6 +239,9 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
         result["comparisons"][key] = {
             f"{a} vs {b}": compare_outcomes(outcomes[a], outcomes[b], names=(a, b))
             for a in ("dlsr", "dlsr-paper") for b in GGCNN_ROWS}
+        for a in ("dlsr", "ggcnn", "ggcnn+aware"):
+            result["comparisons"][key][f"{a} vs mask-pca"] = compare_outcomes(
+                outcomes[a], outcomes["mask-pca"], names=(a, "mask-pca"))
         write_text_atomic(path, json.dumps(result, indent=2, default=float))
         write_text_atomic(out / "curve.md", curve_markdown(result))
         curve_figure(result, out / "curve.png")
