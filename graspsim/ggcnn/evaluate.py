@@ -19,7 +19,7 @@ import numpy as np
 from dlsr.metrics import jaccard_matrix, rectangle_metric
 from dlsr.records import read_jsonl, write_text_atomic
 
-__all__ = ["ggcnn_detection_benchmark", "ggcnn_markdown"]
+__all__ = ["ggcnn_detection_benchmark", "ggcnn_markdown", "config_key"]
 
 
 def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
@@ -91,7 +91,7 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
               "n_folds": n_folds, "seed": seed, "steps": int(steps), "device": device,
               "n_images": len(samples), "train": {k: (list(v) if isinstance(v, tuple) else v)
                                                   for k, v in sorted(train_options.items())}}
-    key = hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
+    key = config_key(config)
     results = out / "ggcnn_results.jsonl"
     done = {r["image_id"]: r for r in read_jsonl(results, required=("image_id",), repair=True)
             if r.get("config_key") == key}
@@ -156,6 +156,12 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
     write_text_atomic(out / "ggcnn.json", json.dumps(summary, indent=2))
     write_text_atomic(out / "ggcnn.md", ggcnn_markdown(summary))
     return summary
+
+
+def config_key(config: dict) -> str:
+    """The key of a benchmark configuration (``ggcnn.json``'s ``config``): it names the fold
+    models (``OUT/models/ggcnn_KEY_foldK``) and marks the per-image results."""
+    return hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
 
 
 def ggcnn_markdown(summary: dict) -> str:
