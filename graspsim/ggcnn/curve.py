@@ -334,13 +334,17 @@ def curve_markdown(result: dict) -> str:
 
 
 def curve_figure(result: dict, path) -> None:
-    """Success against training scenes, one line per detector, Wilson intervals (PNG)."""
+    """Left: success against training scenes, one line per detector, Wilson intervals. Right:
+    GG-CNN's validation curve, success on validation scenes of the train objects against
+    sample-steps, one line per training size (PNG)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4))
+    from ..trials import wilson_interval
+
+    fig, (ax, av) = plt.subplots(1, 2, figsize=(11, 4.2))
     names = sorted({n for r in result["rows"].values() for n in r})
     for name in names:
         pts = [(int(k), r[name]) for k, r in result["rows"].items() if "n" in r.get(name, {})]
@@ -358,7 +362,24 @@ def curve_figure(result: dict, path) -> None:
     ax.set_xlabel("training scenes (train objects)")
     ax.set_ylabel("physical success on test objects (%)")
     ax.set_ylim(0, 100)
-    ax.legend()
+    ax.legend(fontsize=7)
+    for key in sorted(result.get("validation", {}), key=int):
+        v = result["validation"][key]
+        steps = sorted(int(b) for b in v)
+        if not steps:
+            continue
+        k = np.array([v[str(b)]["successes"] for b in steps])
+        n = np.array([v[str(b)]["n"] for b in steps])
+        ci = np.array([wilson_interval(int(a), int(b)) for a, b in zip(k, n, strict=True)])
+        y = k / np.maximum(n, 1)
+        err = 100 * np.clip([y - ci[:, 0], ci[:, 1] - y], 0, None)
+        av.errorbar(steps, 100 * y, yerr=err, marker="o", capsize=3, label=f"{key} scenes")
+    av.set_xscale("log")
+    av.set_xlabel("GG-CNN sample-steps")
+    av.set_ylabel("success on validation scenes, train objects (%)")
+    av.set_ylim(0, 100)
+    if result.get("validation"):
+        av.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
