@@ -386,6 +386,17 @@ class _Stages:
         write_json_atomic(self.path, self.data, default=str)
 
 
+#: Settings of how a run is executed, not of what it computes (every task carries its own seed,
+#: so the results are the same on any backend and number of workers): a run continues with
+#: other values of these.
+EXECUTION_SETTINGS = ("backend", "address", "jobs")
+
+
+def _identity(config: dict) -> dict:
+    """A configuration without its :data:`EXECUTION_SETTINGS`."""
+    return {k: v for k, v in config.items() if k not in EXECUTION_SETTINGS}
+
+
 def _recorded_config(recorded):
     """A recorded configuration with the settings added since it was written at their defaults."""
     try:
@@ -433,10 +444,15 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
         for name, record in object_sets.items():
             check_same_object_set((old.get("object_sets") or {}).get(name), record,
                                   f"{root} ({name})")
-        if _recorded_config(old.get("config")) != json.loads(json.dumps(cfg)):
+        recorded = _recorded_config(old.get("config"))
+        if not isinstance(recorded, dict) or (_identity(recorded)
+                                              != _identity(json.loads(json.dumps(cfg)))):
             raise ValueError(f"{root} holds a run of another configuration ({run_json}); "
                              "use a new --out")
-        log.info("continuing the run in %s", root)
+        changed = {k: (recorded.get(k), cfg[k]) for k in EXECUTION_SETTINGS
+                   if recorded.get(k) != cfg[k]}
+        log.info("continuing the run in %s%s", root, "".join(
+            f"; {k} {a} -> {b}" for k, (a, b) in changed.items()))
     else:
         write_json_atomic(run_json, {
             "config": cfg, "object_sets": object_sets, "versions": _versions(),
@@ -617,8 +633,13 @@ def _trial_detector(name: str, model_path: Path, config: RunConfig, hand: str = 
     return load_detector(name)
 
 
-def resume_job(folder, progress: bool = True) -> Path:
-    """Continue the run in ``folder`` with the configuration recorded in its ``run.json``."""
+def resume_job(folder, progress: bool = True, **execution) -> Path:
+    """Continue the run in ``folder`` with the configuration recorded in its ``run.json``.
+
+    ``execution`` may set :data:`EXECUTION_SETTINGS` (``backend``, ``address``, ``jobs``) to
+    other values than the recorded ones (None keeps the recorded value): they do not change
+    the results.
+    """
     folder = Path(folder)
     run_json = folder / "run.json"
     if not run_json.exists():
@@ -626,8 +647,13 @@ def resume_job(folder, progress: bool = True) -> Path:
     recorded = read_json(run_json, "run record")
     if "config" not in recorded:
         raise ValueError(f"run record {run_json}: no 'config'")
-    config = RunConfig(**_settings(recorded["config"], f"run record {run_json} config"))
-    config = config.validated()
+    unknown = set(execution) - set(EXECUTION_SETTINGS)
+    if unknown:
+        raise TypeError(f"resume_job takes only {EXECUTION_SETTINGS} besides the folder, got "
+                        f"{sorted(unknown)}")
+    settings = dict(_settings(recorded["config"], f"run record {run_json} config"))
+    settings.update({k: v for k, v in execution.items() if v is not None})
+    config = RunConfig(**settings).validated()
     return run_job(config, out=folder, resume=True, progress=progress)
 
 

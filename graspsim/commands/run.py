@@ -20,7 +20,9 @@ def register(subparsers) -> None:
                    help="TOML or YAML file of settings (see graspsim.pipeline.RunConfig)")
     p.add_argument("--out", default=None, metavar="DIR", help="run folder (default runs/NAME)")
     p.add_argument("--resume", default=None, metavar="DIR",
-                   help="continue an interrupted run in DIR with its recorded configuration")
+                   help="continue an interrupted run in DIR with its recorded configuration "
+                        "(--jobs, --backend and --address may differ: they do not change the "
+                        "results)")
     p.add_argument("--name", default=None)
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--backend", choices=["loky", "ray"], default=None)
@@ -46,7 +48,9 @@ def _main(args: argparse.Namespace) -> int:
                              **{k: getattr(args, k) for k in OPTION_NAMES})
         folder = run_folder(config, args.out)
     try:
-        report = resume_job(folder) if args.resume else run_job(config, out=folder)
+        report = (resume_job(folder, backend=args.backend, address=args.address,
+                             jobs=args.jobs)
+                  if args.resume else run_job(config, out=folder))
     except KeyboardInterrupt as exc:  # Ctrl-C or SIGTERM (graspsim.cli.Terminated)
         # Finished stages and trials are on disk: say how to go on, not where Python was.
         word, code = stop_reason(exc)

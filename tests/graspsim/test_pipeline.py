@@ -151,6 +151,32 @@ def test_other_configuration_in_the_same_folder_is_refused(tiny_run, tmp_path, m
     assert pipeline.resume_job(copy, progress=False).exists()
 
 
+def test_a_run_continues_on_other_workers_and_backends(tiny_run, tmp_path, monkeypatch, caplog):
+    # jobs, backend and address do not change the results: not part of the run's identity
+    out, _ = tiny_run
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    monkeypatch.setattr("graspsim.trials.run_trials", lambda *a, **k: (_ for _ in ()).throw(
+        AssertionError("a finished stage was run again")))
+    with caplog.at_level("INFO", logger="graspsim.pipeline"):
+        pipeline.run_job(pipeline.load_config(**{**TINY, "jobs": 2}), out=copy, progress=False)
+    assert "jobs 1 -> 2" in caplog.text
+    seen = {}
+    real_run_job = pipeline.run_job
+
+    def spy(config, **kw):
+        seen["config"] = config
+        return real_run_job(config, **kw)
+
+    monkeypatch.setattr(pipeline, "run_job", spy)
+    assert main(["run", "--resume", str(copy), "--jobs", "2"]) == 0
+    assert seen["config"].jobs == 2 and seen["config"].seed == TINY.get("seed", 0)
+    pipeline.resume_job(copy, progress=False, jobs=None)  # None keeps the recorded value
+    assert seen["config"].jobs == 1
+    with pytest.raises(TypeError, match="only"):
+        pipeline.resume_job(copy, progress=False, seed=1)  # what it computes: not here
+
+
 def test_ctrl_c_says_how_to_continue_in_one_line(tmp_path, monkeypatch, capsys):
     def interrupted(*a, **k):
         raise KeyboardInterrupt
