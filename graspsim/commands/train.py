@@ -25,7 +25,7 @@ def register(subparsers) -> None:
     g.add_argument("--out", required=True, help="MODEL (writes MODEL.pt and MODEL.json)")
     g.add_argument("--steps", type=int, default=20_000,
                    help="sample-steps (images seen, in batches of --batch-size), whatever the "
-                        "dataset size (default %(default)s, about 30 min on 2 CPU cores)")
+                        "dataset size (default %(default)s: 35-50 min on 2 CPU cores)")
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--device", default="cpu", help="cpu (default) or cuda")
     g.add_argument("--batch-size", type=int, default=8)
