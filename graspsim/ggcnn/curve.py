@@ -75,10 +75,10 @@ def equal_time_model(gpath, seconds: float, samples, seed: int, device: str = "c
 
     snap = gpath.with_name(f"{gpath.name}_time{round(seconds)}s")
     if model_paths(snap)[1].is_file():
-        taken = json.loads(model_paths(snap)[1].read_text())["training"]
+        taken = read_json(model_paths(snap)[1], "GG-CNN model")["training"]
         if taken.get("snapshot_seconds") == round(seconds, 2):
             return snap
-    full = json.loads(model_paths(gpath)[1].read_text())["training"]
+    full = read_json(model_paths(gpath)[1], "GG-CNN model")["training"]
     if full["seconds"] <= seconds:
         return gpath
     rate = full["seconds"] / full["sample_steps"]
@@ -203,13 +203,13 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
                 write_text_atomic(path, json.dumps(result, indent=2))
         best = max(budgets, key=lambda b: (val[str(b)]["successes"], -b))
         bpath = gpath if best == budgets[-1] else gpath.with_name(f"{gpath.name}_step{best}")
-        meta = json.loads(model_paths(bpath)[1].read_text())
+        meta = read_json(model_paths(bpath)[1], "GG-CNN model")
         g = GGCNNDetector(bpath, device=device)
         models["ggcnn"] = (g, meta["training"]["seconds"])
         models["ggcnn+aware"] = (gripper_aware(g), meta["training"]["seconds"])
         epath = equal_time_model(gpath, dlsr_seconds, samples, seed=s_model, device=device,
                                  progress=progress)
-        emeta = json.loads(model_paths(epath)[1].read_text())
+        emeta = read_json(model_paths(epath)[1], "GG-CNN model")
         e = GGCNNDetector(epath, device=device)
         models["ggcnn@dlsr-time"] = (e, emeta["training"]["seconds"])
         models["ggcnn+aware@dlsr-time"] = (gripper_aware(e), emeta["training"]["seconds"])

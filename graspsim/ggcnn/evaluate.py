@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from dlsr.metrics import jaccard_matrix, rectangle_metric
-from dlsr.records import read_jsonl, write_text_atomic
+from dlsr.records import read_json, read_jsonl, write_text_atomic
 
 __all__ = ["ggcnn_detection_benchmark", "ggcnn_markdown", "config_key"]
 
@@ -104,7 +104,7 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
         if not model_paths(mpath)[1].is_file():  # resumes from its checkpoint
             train_ggcnn([samples[i] for i in train], mpath, steps=steps, seed=seed + k,
                         device=device, progress=progress, **train_options)
-        meta = json.loads(model_paths(mpath)[1].read_text())
+        meta = read_json(model_paths(mpath)[1], "GG-CNN model")
         train_seconds[k] = meta["training"]["seconds"]
         if not todo:
             continue
