@@ -27,11 +27,16 @@ stand-in's labelled scenes and the sha256 of the subset's rectangles), and a siz
 other data is measured again.
 
 Finished commands are not run again (their output folders under ``--out`` are reused, and the
-benchmarks themselves resume at the cell and fold), so a killed run continues; a run's timing
-is kept in ``OUT/timings.json`` as soon as it finishes.
+benchmarks themselves resume at the cell and fold), so a killed run continues; a command's
+timing is kept in ``OUT/timings.json`` as soon as it finishes. A measurement longer than a
+session is stopped with SIGTERM (or Ctrl-C): the running command saves and stops, the part it
+ran (wall, CPU, peak memory) is kept in ``OUT/partial.json``, and the command that finishes it
+adds those parts (``segments``: how many runs it took). The default ``--out``,
+``results/bench_scale``, is committed without its bulky files (the subsets, the saved
+representations), so the next session continues it on a new machine.
 
 Usage: python scripts/bench_scale.py --sizes 100,300,885 [--jobs 2] [--standin runs/standin]
-       [--out runs/bench_scale] [--tables 1,2]
+       [--out results/bench_scale] [--tables 1,2]
 """
 
 from __future__ import annotations
@@ -51,59 +56,125 @@ from pathlib import Path
 import numpy as np
 
 from dlsr.records import read_json, write_json_atomic
+from graspsim.cli import sigterm_unwinds, stop_reason
 from graspsim.standin import CORNELL, standin_subset
 
 TABLE2_ROWS = (("NKM", "Natural"), ("NKM", "SC"), ("OMP", "Natural"), ("RP", "Natural"))
 
 
-def _tree_rss_mb(root_pid: int) -> float:
-    """Resident memory of ``root_pid`` and all its descendants (MiB), from /proc."""
+def _tree(root_pid: int) -> tuple[float, dict]:
+    """Resident memory of ``root_pid`` and all its descendants (MiB), and their user + system
+    clock ticks per pid, from /proc."""
     children: dict[int, list[int]] = {}
     rss: dict[int, int] = {}
+    ticks: dict[int, int] = {}
     for entry in os.scandir("/proc"):
         if not entry.name.isdigit():
             continue
         try:
             with open(f"/proc/{entry.name}/status") as fh:
                 fields = dict(line.split(":", 1) for line in fh if ":" in line)
-        except OSError:
+            with open(f"/proc/{entry.name}/stat") as fh:
+                stat = fh.read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
             continue
         pid = int(entry.name)
         children.setdefault(int(fields.get("PPid", "0").strip() or 0), []).append(pid)
         rss[pid] = int(fields.get("VmRSS", "0 kB").split()[0])
-    total, todo = 0, [root_pid]
+        ticks[pid] = int(stat[11]) + int(stat[12])  # utime, stime
+    total, todo, mine = 0, [root_pid], {}
     while todo:
         pid = todo.pop()
         total += rss.get(pid, 0)
+        if pid in ticks:
+            mine[pid] = ticks[pid]
         todo.extend(children.get(pid, []))
-    return total / 1024
+    return total / 1024, mine
+
+
+class Interrupted(Exception):
+    """A timed command was stopped (SIGTERM or Ctrl-C) before it finished; ``segment`` is the
+    part it ran (``wall_s``, ``cpu_s``, ``peak_rss_mb``, ``rss_trace_mb``)."""
+
+    def __init__(self, segment: dict):
+        super().__init__("interrupted")
+        self.segment = segment
 
 
 def timed(cmd: list[str]) -> dict:
-    """Run ``cmd``; its wall and CPU seconds and the peak memory of its process tree."""
+    """Run ``cmd``; its wall and CPU seconds and the peak memory of its process tree.
+
+    Stopped by SIGTERM or Ctrl-C, the command is sent SIGTERM (the benchmarks save and stop)
+    and :class:`Interrupted` carries the part it ran: CPU seconds from ``getrusage`` or, when
+    larger (workers that were never waited for), the tree's ticks sampled from /proc.
+    """
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd)
     samples: list[tuple[float, float]] = []
+    ticks: dict = {}
     stop = threading.Event()
 
     def sample():
         while not stop.wait(0.2):
-            samples.append((time.perf_counter() - t0, _tree_rss_mb(proc.pid)))
+            mb, now = _tree(proc.pid)
+            samples.append((time.perf_counter() - t0, mb))
+            for pid, t in now.items():
+                ticks[pid] = max(ticks.get(pid, 0), t)
 
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
-    code = proc.wait()
+    interrupted = False
+    try:
+        code = proc.wait()
+    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (graspsim.cli.Terminated)
+        interrupted = True
+        proc.terminate()
+        try:
+            code = proc.wait(timeout=120)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            code = proc.wait()
     stop.set()
     thread.join()
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    cpu = max(cpu, sum(ticks.values()) / os.sysconf("SC_CLK_TCK"))
+    peak = max((m for _, m in samples), default=0.0)
+    record = {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak, 1),
+              "rss_trace_mb": rss_trace(samples, wall)}
+    if interrupted:
+        raise Interrupted(record)
     if code != 0:
         raise SystemExit(f"bench_scale: {' '.join(cmd)} failed with exit code {code}")
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    peak = max((m for _, m in samples), default=0.0)
-    return {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak, 1),
-            "rss_trace_mb": rss_trace(samples, wall)}
+    return record
+
+
+def resumed(key: str, cmd: list[str], partial_path: Path) -> dict:
+    """:func:`timed` across interruptions: the parts of ``key``'s earlier runs that were
+    stopped (kept in ``partial_path``) are added to the run that finishes it -- wall and CPU
+    seconds summed, the peak memory the largest, one ``rss_trace_mb`` per part -- and
+    ``segments`` says how many runs it took (the benchmarks resume at the cell and fold, so
+    a part's work is not done again; each restart re-reads the data, a few seconds)."""
+    partial = read_json(partial_path, "partial timings") if partial_path.exists() else {}
+    parts = partial.get(key, [])
+    try:
+        t = timed(cmd)
+    except Interrupted as stop:
+        partial[key] = [*parts, stop.segment]
+        write_json_atomic(partial_path, partial, indent=1)
+        raise
+    if not parts:
+        return t
+    allp = [*parts, t]
+    out = {"wall_s": round(sum(p["wall_s"] for p in allp), 2),
+           "cpu_s": round(sum(p["cpu_s"] for p in allp), 2),
+           "peak_rss_mb": max(p["peak_rss_mb"] for p in allp),
+           "rss_trace_mb": [p["rss_trace_mb"] for p in allp], "segments": len(allp)}
+    partial.pop(key, None)
+    write_json_atomic(partial_path, partial, indent=1)
+    return out
 
 
 def rss_trace(samples, wall: float, n_bins: int = 10) -> list:
@@ -203,7 +274,9 @@ def main(argv=None) -> int:
     ap.add_argument("--tables", default="1,2")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--standin", default="runs/standin", help="stand-in folder (made or reused)")
-    ap.add_argument("--out", default="runs/bench_scale")
+    ap.add_argument("--out", default="results/bench_scale",
+                    help="timings and the benchmarks' records (the default is committed, so a "
+                         "measurement of several sessions continues on a new machine)")
     ap.add_argument("--standin-images", type=int, default=CORNELL["images"],
                     help="the stand-in's size; every size measured is its first images")
     ap.add_argument("--detection-preset", default=None,
@@ -212,6 +285,17 @@ def main(argv=None) -> int:
                          "search); recorded with the timings")
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
+    try:
+        with sigterm_unwinds():
+            return _run(args)
+    except KeyboardInterrupt as exc:
+        word, code = stop_reason(exc)
+        print(f"bench_scale: {word}; the same command continues where it stopped",
+              file=sys.stderr)
+        return code
+
+
+def _run(args) -> int:
     sizes = sorted({int(s) for s in args.sizes.split(",")})
     tables = {t.strip() for t in args.tables.split(",")}
     standin = Path(args.standin)
@@ -229,6 +313,7 @@ def main(argv=None) -> int:
                    check=True, stdout=subprocess.DEVNULL)
     made = read_json(standin / "standin.json", "stand-in record")
     timings_path = out / "timings.json"
+    partial_path = out / "partial.json"
     timings = read_json(timings_path, "timings") if timings_path.exists() else {}
     graspsim = [sys.executable, "-m", "graspsim.cli"]
     for size in sizes:
@@ -243,36 +328,47 @@ def main(argv=None) -> int:
                       file=sys.stderr)
             for old in out.glob(f"table[12]_{size}*"):
                 shutil.rmtree(old)
+            if partial_path.exists():
+                partial = read_json(partial_path, "partial timings")
+                for key in [k for k in partial
+                            if k == f"table1_{size}" or k.startswith(f"table2_{size}_")]:
+                    del partial[key]
+                write_json_atomic(partial_path, partial, indent=1)
             row.clear()
             row["data"] = which
         common = ["--data", str(data), "--format", "cornell", "--jobs", str(args.jobs),
                   "--seed", str(args.seed)]
         if "1" in tables and "table1" not in row:
             dest = out / f"table1_{size}"
-            t = timed(graspsim + ["benchmark", "recognition", *common, "--atoms", "300",
-                                  "--folds", "5", "--inner-folds", "5", "--paper-grid",
-                                  "--split", "image", "--out", str(dest)])
+            t = resumed(dest.name, graspsim + [
+                "benchmark", "recognition", *common, "--atoms", "300", "--folds", "5",
+                "--inner-folds", "5", "--paper-grid", "--split", "image", "--out", str(dest)],
+                partial_path)
             row["table1"] = {**t, "stages": table1_stages(dest)}
             write_json_atomic(timings_path, timings, indent=1)
         if "2" in tables and "table2" not in row:
-            total = {"wall_s": 0.0, "cpu_s": 0.0, "peak_rss_mb": 0.0}
-            dests, traces = [], []
+            runs = row.setdefault("table2_runs", {})  # each command's timing as it finishes
+            dests = []
             preset = ["--preset", args.detection_preset] if args.detection_preset else []
             for learner, encoder in TABLE2_ROWS:
                 for split in ("image", "object"):
                     dest = out / f"table2_{size}_{learner}-{encoder}_{split}"
-                    t = timed(graspsim + ["benchmark", "detection", *common, "--learner",
-                                          learner, "--encoder", encoder, "--split", split,
-                                          "--folds", "5", "--overlays", "0",
-                                          *preset, "--out", str(dest)])
-                    total["wall_s"] += t["wall_s"]
-                    total["cpu_s"] += t["cpu_s"]
-                    total["peak_rss_mb"] = max(total["peak_rss_mb"], t["peak_rss_mb"])
-                    traces.append(t["rss_trace_mb"])
                     dests.append(dest)
-            row["table2"] = {**{k: round(v, 2) for k, v in total.items()},
-                             "rss_trace_mb": traces, "stages": table2_stages(dests),
+                    if dest.name in runs:
+                        continue
+                    runs[dest.name] = resumed(dest.name, graspsim + [
+                        "benchmark", "detection", *common, "--learner", learner, "--encoder",
+                        encoder, "--split", split, "--folds", "5", "--overlays", "0", *preset,
+                        "--out", str(dest)], partial_path)
+                    write_json_atomic(timings_path, timings, indent=1)
+            parts = [runs[d.name] for d in dests]
+            row["table2"] = {"wall_s": round(sum(p["wall_s"] for p in parts), 2),
+                             "cpu_s": round(sum(p["cpu_s"] for p in parts), 2),
+                             "peak_rss_mb": max(p["peak_rss_mb"] for p in parts),
+                             "rss_trace_mb": [p["rss_trace_mb"] for p in parts],
+                             "stages": table2_stages(dests),
                              "detector": table2_detector(dests[0])}
+            del row["table2_runs"]
             write_json_atomic(timings_path, timings, indent=1)
     result = {"machine": {"cpus": os.cpu_count(), "jobs": args.jobs,
                           "platform": sys.platform},

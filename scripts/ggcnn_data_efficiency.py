@@ -2,12 +2,18 @@
 training scenes of the train objects, physical success on the same test scenes (README,
 docs/experiments/2026-12-03-ggcnn.md; library: graspsim.ggcnn.curve).
 
-    nice -n 10 .venv/bin/python scripts/ggcnn_data_efficiency.py --out runs/ggcnn-curve \\
+    nice -n 10 .venv/bin/python scripts/ggcnn_data_efficiency.py [--out results/ggcnn-curve] \\
         [--sizes 10 30 100 300] [--budgets 2000 5000 10000 20000] [--test-trials 200] \\
         [--val-trials 50] [--heldout 50] [--jobs 2] [--device cpu]
 
 Resumes: the same command continues where it stopped (smallest sizes are done first).
 Written: curve.json, curve.md and curve.png in --out after every size.
+
+The default --out is committed: the README's figure is results/ggcnn-curve/curve.png, with the
+models, trial records and checkpoints it came from, so a session on a new machine continues
+the campaign from the last commit (the datasets, about 1.3 MB a scene, are left out and
+regenerated from the seed, scene for scene the same). To reproduce it from nothing, give
+another --out.
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ from graspsim.ggcnn.curve import data_efficiency
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="runs/ggcnn-curve")
+    p.add_argument("--out", default="results/ggcnn-curve")
     p.add_argument("--sizes", type=int, nargs="+", default=[10, 30, 100, 300])
     p.add_argument("--budgets", type=int, nargs="+", default=[2000, 5000, 10000, 20000],
                    help="GG-CNN sample-step budgets validated on train-object scenes")

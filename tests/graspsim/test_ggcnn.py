@@ -347,3 +347,26 @@ def test_catch_up_reads_the_fixed_pair_along_the_curve():
     assert c["level"] is None and c["not_separated"] is None
     assert "does not catch up" in c["sentence"]
     assert catch_up({"rows": {}})["sentence"] == "no size measured yet"
+
+
+def test_data_efficiency_resumes_from_its_committed_files_alone(tmp_path):
+    """The campaign's folder without its datasets (what is committed) continues on another
+    machine: the datasets come back from the seed and nothing is trained or tried again."""
+    import shutil
+
+    from graspsim.ggcnn.curve import data_efficiency
+
+    out = tmp_path / "curve"
+    kw = dict(sizes=[2], budgets=[8, 16], test_trials=2, val_trials=2, heldout_images=2,
+              candidates=16, n_jobs=1, n_atoms=16, n_patches=2000, progress=False)
+    first = data_efficiency(out, **kw)
+    assert set(first["rows"]["2"]) >= {"dlsr", "dlsr-paper", "ggcnn", "mask-pca"}
+    kept = {p: p.stat().st_mtime_ns
+            for p in [*(out / "models").iterdir(), *out.glob("*/*/trials.jsonl")]}
+    assert len(kept) > 10  # the models, the validation trials and the test trials
+    shutil.rmtree(out / "dataset")
+    shutil.rmtree(out / "heldout")
+    again = data_efficiency(out, **kw)
+    assert again["rows"] == first["rows"] and again["validation"] == first["validation"]
+    changed = [p for p, t in kept.items() if p.stat().st_mtime_ns != t]
+    assert not changed, f"trained or tried again: {changed}"

@@ -150,3 +150,52 @@ def test_bench_scale_names_the_data_each_size_was_measured_on(tmp_path):
     assert bench.data_fingerprint(tmp_path, made)["rectangles"] != first["rectangles"]
     other = {"reached": {"images": 100}, "labelled_fingerprint": "abc"}  # another stand-in
     assert bench.data_fingerprint(tmp_path, other) != first
+
+
+def test_bench_scale_adds_the_parts_of_a_command_stopped_across_sessions(tmp_path, monkeypatch):
+    bench = _bench_scale()
+    partial = tmp_path / "partial.json"
+    part = {"wall_s": 10.0, "cpu_s": 18.0, "peak_rss_mb": 900.0, "rss_trace_mb": [900.0]}
+    runs = iter([bench.Interrupted(part), bench.Interrupted(dict(part, peak_rss_mb=950.0)),
+                 {"wall_s": 5.0, "cpu_s": 9.0, "peak_rss_mb": 700.0, "rss_trace_mb": [700.0]}])
+
+    def fake_timed(cmd):
+        r = next(runs)
+        if isinstance(r, Exception):
+            raise r
+        return r
+
+    monkeypatch.setattr(bench, "timed", fake_timed)
+    for _ in range(2):  # two sessions stopped, each keeps the part it ran
+        with pytest.raises(bench.Interrupted):
+            bench.resumed("table1_885", ["cmd"], partial)
+    assert len(bench.read_json(partial, "p")["table1_885"]) == 2
+    t = bench.resumed("table1_885", ["cmd"], partial)
+    assert t["wall_s"] == 25.0 and t["cpu_s"] == 45.0 and t["segments"] == 3
+    assert t["peak_rss_mb"] == 950.0 and len(t["rss_trace_mb"]) == 3
+    assert "table1_885" not in bench.read_json(partial, "p")  # used up
+
+
+def test_bench_scale_timed_command_stopped_keeps_its_cpu_and_ends_the_child():
+    import signal
+    import subprocess
+    import sys
+
+    bench = _bench_scale()
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGALRM, stop)
+    signal.setitimer(signal.ITIMER_REAL, 1.5)
+    try:
+        with pytest.raises(bench.Interrupted) as info:
+            bench.timed([sys.executable, "-c", "while True: pass"])
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    seg = info.value.segment
+    assert seg["wall_s"] > 0 and seg["cpu_s"] > 0 and seg["peak_rss_mb"] > 0
+    # the child was ended: nothing of it is left running
+    out = subprocess.run(["pgrep", "-f", "while True: pass"], capture_output=True, text=True)
+    assert out.stdout.strip() == ""
