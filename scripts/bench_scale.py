@@ -92,13 +92,15 @@ def _tree(root_pid: int) -> tuple[float, dict]:
     return total / 1024, mine
 
 
-class Interrupted(Exception):
+class Interrupted(KeyboardInterrupt):
     """A timed command was stopped (SIGTERM or Ctrl-C) before it finished; ``segment`` is the
-    part it ran (``wall_s``, ``cpu_s``, ``peak_rss_mb``, ``rss_trace_mb``)."""
+    part it ran (``wall_s``, ``cpu_s``, ``peak_rss_mb``, ``rss_trace_mb``), ``cause`` the
+    stop itself (:class:`graspsim.cli.Terminated` for SIGTERM), which gives the exit code."""
 
-    def __init__(self, segment: dict):
+    def __init__(self, segment: dict, cause: BaseException | None = None):
         super().__init__("interrupted")
         self.segment = segment
+        self.cause = cause
 
 
 def timed(cmd: list[str]) -> dict:
@@ -124,11 +126,11 @@ def timed(cmd: list[str]) -> dict:
 
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
-    interrupted = False
+    interrupted = None
     try:
         code = proc.wait()
-    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (graspsim.cli.Terminated)
-        interrupted = True
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (graspsim.cli.Terminated)
+        interrupted = exc
         proc.terminate()
         try:
             code = proc.wait(timeout=120)
@@ -144,8 +146,8 @@ def timed(cmd: list[str]) -> dict:
     peak = max((m for _, m in samples), default=0.0)
     record = {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak, 1),
               "rss_trace_mb": rss_trace(samples, wall)}
-    if interrupted:
-        raise Interrupted(record)
+    if interrupted is not None:
+        raise Interrupted(record, interrupted) from None
     if code != 0:
         raise SystemExit(f"bench_scale: {' '.join(cmd)} failed with exit code {code}")
     return record
@@ -288,8 +290,8 @@ def main(argv=None) -> int:
     try:
         with sigterm_unwinds():
             return _run(args)
-    except KeyboardInterrupt as exc:
-        word, code = stop_reason(exc)
+    except KeyboardInterrupt as exc:  # Interrupted too: a timed command was stopped
+        word, code = stop_reason(getattr(exc, "cause", None) or exc)
         print(f"bench_scale: {word}; the same command continues where it stopped",
               file=sys.stderr)
         return code

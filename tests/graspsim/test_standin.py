@@ -161,7 +161,7 @@ def test_bench_scale_adds_the_parts_of_a_command_stopped_across_sessions(tmp_pat
 
     def fake_timed(cmd):
         r = next(runs)
-        if isinstance(r, Exception):
+        if isinstance(r, BaseException):
             raise r
         return r
 
@@ -199,3 +199,17 @@ def test_bench_scale_timed_command_stopped_keeps_its_cpu_and_ends_the_child():
     # the child was ended: nothing of it is left running
     out = subprocess.run(["pgrep", "-f", "while True: pass"], capture_output=True, text=True)
     assert out.stdout.strip() == ""
+
+
+def test_bench_scale_stopped_by_sigterm_says_so_in_one_line(monkeypatch, capsys):
+    from graspsim.cli import Terminated
+
+    bench = _bench_scale()
+
+    def stopped(args):  # a timed command stopped by SIGTERM, as timed() reports it
+        raise bench.Interrupted({"wall_s": 1.0}, Terminated())
+
+    monkeypatch.setattr(bench, "_run", stopped)
+    assert bench.main(["--sizes", "100"]) == 143  # the shell's code for SIGTERM, no traceback
+    err = capsys.readouterr().err
+    assert "terminated; the same command continues" in err and "Traceback" not in err
