@@ -181,7 +181,7 @@ def run_round(sim, specs, detector, seed: int, index: int,
             st = _attempt_streams(seed, index, a)
             bodies = build_scene(sim, scene)
             frame = profile_capture(sim, scene, bodies, st["camera"], config.profile)
-        positives, n_labelled, (rects, scores, error, planning) = _label_and_propose(
+        positives, n_labelled, (rects, scores, error, planning), _ = _label_and_propose(
             sim, scene, frame, bodies, st, detector, config, params, name,
             f"round {index} (seed {seed}), attempt {a}")
         if error is not None or not rects:

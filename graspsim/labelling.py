@@ -39,6 +39,7 @@ __all__ = [
     "extent_along",
     "label_rectangles",
     "mask_axes",
+    "rank_order",
     "rank_positives",
 ]
 
@@ -309,19 +310,27 @@ def label_rectangles(sim, scene, frame, candidates, params: ExecutionParams | No
     return Labelled(list(candidates), results)
 
 
+def rank_order(labelled: Labelled, radius_px: float = 12.0,
+               max_angle: float = np.radians(20)) -> list[int]:
+    """The indices into ``labelled.rects`` of the positives, ranked as :func:`rank_positives`
+    ranks them (what :mod:`graspsim.scene_labels` keeps of a labelled scene)."""
+    idx = [i for i, r in enumerate(labelled.results) if r.success]
+    if not idx:
+        return []
+    arr = np.array([[labelled.rects[i].x, labelled.rects[i].y, labelled.rects[i].theta]
+                    for i in idx])
+    d = np.hypot(arr[:, None, 0] - arr[None, :, 0], arr[:, None, 1] - arr[None, :, 1])
+    da = np.mod(arr[:, None, 2] - arr[None, :, 2], np.pi)
+    da = np.minimum(da, np.pi - da)
+    score = ((d <= radius_px) & (da <= max_angle)).sum(axis=1)
+    order = np.argsort(-score, kind="stable")
+    return [idx[i] for i in order]
+
+
 def rank_positives(labelled: Labelled, radius_px: float = 12.0,
                    max_angle: float = np.radians(20)) -> list[GraspRectangle]:
     """Positives ranked by robustness: how many other positives lie close in centre and angle.
 
     Ties keep the sampling order. Used by the oracle ("best physics-labelled positive").
     """
-    pos = labelled.positives
-    if not pos:
-        return []
-    arr = np.array([[r.x, r.y, r.theta] for r in pos])
-    d = np.hypot(arr[:, None, 0] - arr[None, :, 0], arr[:, None, 1] - arr[None, :, 1])
-    da = np.mod(arr[:, None, 2] - arr[None, :, 2], np.pi)
-    da = np.minimum(da, np.pi - da)
-    score = ((d <= radius_px) & (da <= max_angle)).sum(axis=1)
-    order = np.argsort(-score, kind="stable")
-    return [pos[i] for i in order]
+    return [labelled.rects[i] for i in rank_order(labelled, radius_px, max_angle)]

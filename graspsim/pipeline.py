@@ -576,7 +576,9 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
     ``config.trial_objects`` (default: the held-out test objects).
 
     Each detector's trials go to ``root / "trials" / name`` (resumed trial by trial) and its
-    summary into ``stages`` as ``"trials/<name>"`` once finished. A baseline may be any name
+    summary into ``stages`` as ``"trials/<name>"`` once finished. The scenes are labelled by
+    physics once, by the first detector's trials, into ``root / "labels"``
+    (:class:`graspsim.scene_labels.SceneLabels`), and the others read them. A baseline may be any name
     :func:`graspsim.detectors.load_detector` takes, plug-ins (``package.module:NAME``,
     entry-point names) included.
     """
@@ -594,7 +596,7 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
                        seed=seed,
                        out=root / "trials" / name, config=trial_cfg, executor=executor,
                        progress=progress, detector_name=name,
-                       params=config.execution_params())
+                       params=config.execution_params(), labels=root / "labels")
         s.pop("records", None)
         s["seconds"] = time.perf_counter() - t0
         stages.finish(key, s)

@@ -55,20 +55,26 @@ from dlsr.records import (
 from .detectors import check_detections, load_detector, one_line
 from .execution import (
     ExecutionParams,
-    describe_changes,
     execute_grasp,
-    execution_changes,
     execution_params_from_dict,
     harness_grasps,
     run_grasp,
 )
 from .graspability import apply_graspability
-from .labelling import label_rectangles, rank_positives, sample_candidates
+from .labelling import label_rectangles, rank_order, sample_candidates
 from .object_sets import ObjectSet, as_object_set, check_same_object_set
 from .objects import ObjectSpec
 from .scene import build_scene, capture
 from .scenes import check_scene, make_scene_of
 from .sim import Simulation
+from .trial_summary import (  # noqa: F401 (public here, as before)
+    _execution_line,
+    _planning_line,
+    planning_stats,
+    summarize,
+    summary_markdown,
+    wilson_interval,
+)
 
 __all__ = [
     "TrialConfig",
@@ -123,20 +129,6 @@ class TrialConfig:
     sampler: str = "mixed"
     profile: str = "default"
     scene: str = "drop"
-
-
-def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """Wilson score interval for a binomial proportion (95 % by default).
-
-    Returns ``(nan, nan)`` for ``n == 0``.
-    """
-    if n == 0:
-        return (float("nan"), float("nan"))
-    p = k / n
-    denom = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (float(max(0.0, centre - half)), float(min(1.0, centre + half)))
 
 
 def resolve_objects(objects, params: ExecutionParams | None = None) -> list[ObjectSpec]:
@@ -326,22 +318,36 @@ def _detector_name(detector) -> str:
     return str(getattr(detector, "spec", None) or type(detector).__name__)
 
 
-def _label_scene(sim, scene, frame, bodies, rng, detector, config, params):
-    """Physics labels of the observed scene: ``(positives or None, n_labelled)``."""
+def _label_scene(sim, scene, frame, bodies, rng, detector, config, params, known=None):
+    """Physics labels of the observed scene: ``(positives or None, n_labelled, entry)``.
+
+    ``known`` is the scene's entry in a :class:`graspsim.scene_labels.SceneLabels` store (or
+    None): the candidates are drawn as always and, when they are the ones it was made from,
+    its positives are taken instead of executing them. ``entry`` is the store entry of labels
+    executed here (None when ``known`` was used or nothing was labelled).
+    """
+    from .scene_labels import candidates_digest, known_positives
+
     if config.n_candidates > 0:
         cands = sample_candidates(frame.segmentation, bodies.objects, rng,
                                   config.n_candidates, depth=frame.depth_clean,
                                   mode=config.sampler, intrinsics=frame.intrinsics,
                                   max_opening=(params or ExecutionParams()).gripper.geometry
                                   .max_opening)
+        positives = known_positives(known, cands)
+        if positives is not None:
+            return positives, len(cands), None
         kw = {}
         if config.label_with_clean_depth:
             kw = {"depth": frame.depth_clean, "depth_valid": frame.depth_clean > 0}
         labelled = label_rectangles(sim, scene, frame, cands, params, **kw)
-        return rank_positives(labelled), len(cands)
+        order = rank_order(labelled)
+        entry = {"positives": order, "n_labelled": len(cands),
+                 "candidates": candidates_digest(cands)}
+        return [cands[i] for i in order], len(cands), entry
     if getattr(detector, "requires_labels", False):
         raise ValueError("this detector needs labelled scenes: use n_candidates > 0")
-    return None, 0
+    return None, 0, None
 
 
 def propose(detector, obs, name: str | None = None):
@@ -405,13 +411,20 @@ def _execute(sim, scene, frame, rects, scores, error, positives, params):
 
 def run_trial(sim, specs, detector, seed: int, index: int,
               config: TrialConfig = TrialConfig(),
-              params: ExecutionParams | None = None, name: str | None = None) -> dict:
+              params: ExecutionParams | None = None, name: str | None = None,
+              known: dict | None = None, share: bool = False) -> dict:
     """One trial: scene, observation, (labels), detection, execution, verdict.
 
     Parameters
     ----------
     name : str or None
         The detector's name in error messages (default: its plug-in name or class name).
+    known : dict or None
+        The scene's labels from a :class:`graspsim.scene_labels.SceneLabels` store, used
+        instead of executing the candidates (the record is the same).
+    share : bool
+        Return labels executed here in the record's ``"_labels"``, for the store (the caller
+        takes it out).
 
     Returns
     -------
@@ -430,9 +443,9 @@ def run_trial(sim, specs, detector, seed: int, index: int,
     t0 = time.perf_counter()
     scene, bodies, frame, st = observe_scene(sim, specs, seed, index, config.n_objects,
                                              config.profile, config.scene)
-    positives, n_labelled, (rects, scores, error, planning) = _label_and_propose(
+    positives, n_labelled, (rects, scores, error, planning), entry = _label_and_propose(
         sim, scene, frame, bodies, st, detector, config, params, name,
-        f"trial {index} (seed {seed})")
+        f"trial {index} (seed {seed})", known)
     record = {
         "index": index, "seed": seed, "object": [o.spec.name for o in scene.objects],
         "graspable": all(o.spec.graspable for o in scene.objects),
@@ -442,29 +455,34 @@ def run_trial(sim, specs, detector, seed: int, index: int,
     record.update(_execute(sim, scene, frame, rects, scores, error, positives, params)[0])
     record["planning_seconds"] = round(planning, 6)
     record["seconds"] = round(time.perf_counter() - t0, 4)
+    if share and entry is not None:
+        record["_labels"] = {"index": index, **entry}
     return record
 
 
 def _label_and_propose(sim, scene, frame, bodies, streams, detector, config, params, name,
-                       where: str):
-    """Label the observed scene (when ``config`` asks) and ask the detector for rectangles.
+                       where: str, known: dict | None = None):
+    """Label the observed scene (when ``config`` asks; from ``known``, a store's entry, when it
+    fits) and ask the detector for rectangles.
 
-    Returns ``(positives or None, n_labelled, propose(...))``; a return value that breaks the
+    Returns ``(positives or None, n_labelled, propose(...), entry)``, ``entry`` the labels
+    executed here for a store (see :func:`_label_scene`); a return value that breaks the
     detector protocol is a ValueError prefixed with ``where`` (the trial, round or attempt).
     """
     obs = observation(frame, streams["detector_seed"])
-    positives, n_labelled = _label_scene(sim, scene, frame, bodies, streams["label"], detector,
-                                         config, params)
+    positives, n_labelled, entry = _label_scene(sim, scene, frame, bodies, streams["label"],
+                                                detector, config, params, known)
     if positives is not None:
         obs["positives"] = positives
     try:
-        return positives, n_labelled, propose(detector, obs, name)
+        return positives, n_labelled, propose(detector, obs, name), entry
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
 
 
-def _trial_task(specs, detector, seed, index, config, params):
-    return run_trial(_worker_sim(), specs, detector, seed, index, config, params)
+def _trial_task(specs, detector, seed, index, config, params, known=None, share=False):
+    return run_trial(_worker_sim(), specs, detector, seed, index, config, params, known=known,
+                     share=share)
 
 
 def read_done(path: Path) -> dict[int, dict]:
@@ -519,15 +537,18 @@ def _open_campaign(out, meta: dict, filename: str):
     return out, jsonl, read_done(jsonl)
 
 
-def _run_missing(fn, tasks, done: dict, jsonl, executor, desc: str) -> int:
+def _run_missing(fn, tasks, done: dict, jsonl, executor, desc: str, on_record=None) -> int:
     """Run ``fn(*task)`` for every task, append each record to ``jsonl`` (flushed) as it comes
-    and put it in ``done`` by its ``index``; returns the number of new records."""
+    and put it in ``done`` by its ``index``; returns the number of new records. ``on_record``,
+    when given, sees each record first (and may take fields out of it)."""
     new = 0
     if not tasks:
         return new
     fh = open(jsonl, "a") if jsonl is not None else None  # noqa: SIM115
     try:
         for rec in executor.imap(fn, tasks, desc=desc, star=True):
+            if on_record is not None:
+                on_record(rec)
             done[rec["index"]] = rec
             new += 1
             if fh is not None:
@@ -576,16 +597,6 @@ def campaign_execution_params(folder) -> ExecutionParams:
     return execution_params_from_dict(cfg.get("execution", {}), str(path))
 
 
-def _execution_line(s: dict) -> str | None:
-    """The summary line naming the execution parameters that differ from the defaults."""
-    if not isinstance(s.get("execution"), dict):
-        return None
-    changes = execution_changes(execution_params_from_dict(s["execution"], "summary"))
-    if not changes:
-        return None
-    return f"- execution parameters other than the defaults: {describe_changes(changes)}"
-
-
 def _resolve(detector, detector_name):
     name = detector_name or (str(detector) if isinstance(detector, str | Path)
                              else _detector_name(detector))
@@ -603,7 +614,7 @@ def _executor(executor, n_jobs, progress):
 def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, out=None,
                n_jobs: int = 1, config: TrialConfig = TrialConfig(),
                params: ExecutionParams | None = None, progress: bool = False,
-               executor=None, detector_name: str | None = None) -> dict:
+               executor=None, detector_name: str | None = None, labels=None) -> dict:
     """Run (or finish) ``n`` trials and write records and summaries to ``out``.
 
     Parameters
@@ -629,6 +640,11 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
         Where trials run (local cores or a Ray cluster; ``n_jobs`` is then ignored).
     detector_name : str or None
         Name recorded for a detector object (default: its plug-in name or class name).
+    labels : str or Path or None
+        A folder of the scenes' physics labels shared with other detectors' trials on the
+        same scenes (:class:`graspsim.scene_labels.SceneLabels`, made when missing): scenes
+        it holds are not labelled again, the others are added to it. The records are the
+        same with or without it. A folder of other scenes is refused.
 
     Returns
     -------
@@ -637,16 +653,33 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     """
     det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config,
                                        params)
+    store, known, on_record = None, {}, None
+    if labels is not None and config.n_candidates > 0:
+        from .scene_labels import SceneLabels
+
+        store = SceneLabels.open(labels, {k: v for k, v in meta.items() if k != "detector"})
+        known = store.read()
+
+        def on_record(rec):
+            entry = rec.pop("_labels", None)
+            if entry is not None:
+                store.add(entry)
+
     return _campaign(_trial_task, "trials", meta, out, n, [specs, det, seed, config, params],
-                     executor, n_jobs, progress, summarize, summary_markdown)
+                     executor, n_jobs, progress, summarize, summary_markdown,
+                     item_args=(lambda i: (known.get(i), True)) if store is not None else None,
+                     on_record=on_record)
 
 
 def _campaign(task, unit: str, meta: dict, out, n: int, args: list, executor, n_jobs: int,
-              progress: bool, summarize_fn, markdown_fn) -> dict:
+              progress: bool, summarize_fn, markdown_fn, item_args=None,
+              on_record=None) -> dict:
     """Run (or finish) items ``0 .. n-1`` of a resumable campaign and write its summaries.
 
-    Item ``i`` runs ``task(*args[:3], i, *args[3:])`` (``specs, detector, seed, i, config,
-    params``); records go to ``out/<unit>.jsonl`` as they come, the summary of
+    Item ``i`` runs ``task(*args[:3], i, *args[3:], *item_args(i))`` (``specs, detector, seed,
+    i, config, params``, then what ``item_args`` gives item ``i``, when given); ``on_record``
+    sees each new record before it is kept (:func:`_run_missing`); records go to
+    ``out/<unit>.jsonl`` as they come, the summary of
     ``summarize_fn(records)`` (with ``meta``, ``<unit>_per_second`` and ``n_jobs``) to
     ``summary.json`` and ``markdown_fn(summary)`` to ``summary.md``.
     """
@@ -655,9 +688,10 @@ def _campaign(task, unit: str, meta: dict, out, n: int, args: list, executor, n_
     if done:
         log.info("resuming: %d of %d %s already done", n - len(todo), n, unit)
     t0 = time.perf_counter()
-    tasks = [(*args[:3], i, *args[3:]) for i in todo]
+    tasks = [(*args[:3], i, *args[3:], *(item_args(i) if item_args else ())) for i in todo]
     new = _run_missing(task, tasks, done, jsonl,
-                       _executor(executor, n_jobs, progress) if tasks else None, unit)
+                       _executor(executor, n_jobs, progress) if tasks else None, unit,
+                       on_record)
     wall = time.perf_counter() - t0
     records = [done[i] for i in sorted(done) if i < n]
     summary = summarize_fn(records)
@@ -669,105 +703,3 @@ def _campaign(task, unit: str, meta: dict, out, n: int, args: list, executor, n_
         write_text_atomic(out / "summary.md", markdown_fn(summary))
     summary["records"] = records
     return summary
-
-
-def planning_stats(seconds) -> dict:
-    """Median and 95th percentile (linear interpolation) of planning times, seconds."""
-    x = np.asarray([s for s in seconds if s is not None], dtype=float)
-    if x.size == 0:
-        return {"n": 0, "median": None, "p95": None}
-    return {"n": int(x.size), "median": float(np.median(x)), "p95": float(np.percentile(x, 95))}
-
-
-def summarize(records: list[dict]) -> dict:
-    """Success rate (Wilson 95 %), metric accuracy, verdict-vs-outcome table, failure reasons."""
-    n = len(records)
-    k = sum(bool(r["success"]) for r in records)
-    lo, hi = wilson_interval(k, n)
-    verdicts = [r for r in records if r.get("metric") is not None]
-    table = {"metric_true": {"success": 0, "failure": 0},
-             "metric_false": {"success": 0, "failure": 0}}
-    for r in verdicts:
-        table["metric_true" if r["metric"] else "metric_false"][
-            "success" if r["success"] else "failure"] += 1
-    reasons: dict[str, int] = {}
-    for r in records:
-        if not r["success"]:
-            reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
-    m = len(verdicts)
-    mk = sum(bool(r["metric"]) for r in verdicts)
-    per_object: dict[str, list[int]] = {}
-    for r in records:
-        name = "+".join(r["object"])
-        per_object.setdefault(name, [0, 0])
-        per_object[name][0] += int(bool(r["success"]))
-        per_object[name][1] += 1
-    seconds = [r.get("seconds", 0.0) for r in records]
-    g = [r for r in records if r.get("graspable", True)]
-    gk = sum(bool(r["success"]) for r in g)
-    return {
-        "n": n,
-        "successes": k,
-        "success_rate": k / n if n else float("nan"),
-        "success_ci95": [lo, hi],
-        "graspable_n": len(g),
-        "graspable_success_rate": gk / len(g) if g else None,
-        "graspable_success_ci95": list(wilson_interval(gk, len(g))) if g else None,
-        "metric_n": m,
-        "metric_accuracy": mk / m if m else None,
-        "metric_ci95": list(wilson_interval(mk, m)) if m else None,
-        "verdict_vs_outcome": table,
-        "agreement": ((table["metric_true"]["success"] + table["metric_false"]["failure"]) / m
-                      if m else None),
-        "failure_reasons": dict(sorted(reasons.items(), key=lambda kv: -kv[1])),
-        "per_object": {k_: {"successes": v[0], "n": v[1]} for k_, v in sorted(per_object.items())},
-        "seconds_per_trial": float(np.mean(seconds)) if seconds else None,
-        "planning_seconds": planning_stats(r.get("planning_seconds") for r in records),
-    }
-
-
-def summary_markdown(s: dict) -> str:
-    """The summary as a Markdown report."""
-    def pct(x):
-        return "n/a" if x is None or (isinstance(x, float) and np.isnan(x)) else f"{100 * x:.1f} %"
-
-    t = s["verdict_vs_outcome"]
-    tps = "n/a" if s.get("trials_per_second") is None else f"{s['trials_per_second']:.2f}"
-    lines = [
-        f"# Grasp trials: detector `{s.get('detector')}` on `{s.get('objects')}` objects",
-        "",
-        f"- trials: {s['n']} (seed {s.get('seed')}; scene "
-        f"{(s.get('config') or {}).get('scene', 'drop')})",
-        f"- physical success: {s['successes']}/{s['n']} = {pct(s['success_rate'])} "
-        f"(Wilson 95 % interval {pct(s['success_ci95'][0])} - {pct(s['success_ci95'][1])})",
-        f"- on graspable objects: {pct(s['graspable_success_rate'])} "
-        f"(n = {s['graspable_n']}"
-        + (f", Wilson 95 % {pct(s['graspable_success_ci95'][0])} - "
-           f"{pct(s['graspable_success_ci95'][1])})" if s["graspable_n"] else ")"),
-        f"- rectangle-metric accuracy on the same trials: {pct(s['metric_accuracy'])} "
-        f"(n = {s['metric_n']})",
-        f"- metric/physics agreement: {pct(s['agreement'])}",
-        f"- trials per second (this run): {tps} with {s.get('n_jobs')} job(s); "
-        f"mean {s['seconds_per_trial'] or 0:.2f} s per trial per worker",
-        _planning_line(s.get("planning_seconds")),
-        *filter(None, [_execution_line(s)]),
-        "",
-        "| rectangle metric \\ physics | success | failure |",
-        "|---|---|---|",
-        f"| correct | {t['metric_true']['success']} | {t['metric_true']['failure']} |",
-        f"| wrong | {t['metric_false']['success']} | {t['metric_false']['failure']} |",
-        "",
-        "| failure reason | trials |",
-        "|---|---|",
-    ]
-    lines += [f"| {k} | {v} |" for k, v in s["failure_reasons"].items()]
-    lines += ["", "| object | successes | trials |", "|---|---|---|"]
-    lines += [f"| {k} | {v['successes']} | {v['n']} |" for k, v in s["per_object"].items()]
-    return "\n".join(lines) + "\n"
-
-
-def _planning_line(p) -> str:
-    if not p or not p.get("n"):
-        return "- detector planning time: not recorded"
-    return (f"- detector planning time (predict): median {1000 * p['median']:.3g} ms, "
-            f"95th percentile {1000 * p['p95']:.3g} ms (n = {p['n']})")

@@ -73,7 +73,7 @@ def main(argv=None) -> int:
     for name in names:
         run_trials(_trial_detector(name, model_path, config), objects=oset, n=args.n,
                    seed=args.seed, out=folder / name, config=trial_cfg, executor=executor,
-                   progress=True, detector_name=name)
+                   progress=True, detector_name=name, labels=folder / "labels")
     table = trial_table(folder, names, oset, args.graspability)
     (folder / "table.json").write_text(json.dumps(table, indent=1) + "\n")
     (folder / "table.md").write_text(table_markdown(table))

@@ -63,6 +63,11 @@ def register(subparsers) -> None:
                         "default (not adopted: README, 'Clutter removal'); recorded in "
                         "config.json")
     add_gripper_arg(p)
+    p.add_argument("--labels", default=None, metavar="DIR",
+                   help="a folder of the scenes' physics labels shared with other detectors' "
+                        "trials on the same scenes (same --seed, objects and options): scenes "
+                        "it holds are not labelled again, the others are added (made when "
+                        "missing; the records are the same with or without it)")
     p.add_argument("--declutter", action="store_true",
                    help="clutter-removal rounds: a lifted object leaves the scene and the "
                         "detector grasps again; reports grasp success and declutter rates "
@@ -97,13 +102,17 @@ def _run(args: argparse.Namespace) -> int:
     if args.declutter:
         from graspsim.declutter import run_rounds
 
+        if args.labels is not None:
+            raise ValueError("--labels: clutter rounds label every observation of a round, "
+                             "which depends on the detector's grasps; not with --declutter")
+
         s = run_rounds(**kwargs)
         print(f"{args.detector}: grasp success {s['successes']}/{s['attempts']} = "
               f"{_pct(s['success_rate'])}, declutter rate {s['removed']}/"
               f"{s['objects_placed']} = {_pct(s['declutter_rate'])} over {s['rounds']} rounds "
               f"of {k} objects; summary in {args.out}/summary.md")
         return 0
-    s = run_trials(**kwargs)
+    s = run_trials(**kwargs, labels=args.labels)
     lo, hi = s["success_ci95"]
     print(f"{args.detector}: success {s['successes']}/{s['n']} = {_pct(s['success_rate'])} "
           f"(95 % CI {_pct(lo)}-{_pct(hi)}); summary in {args.out}/summary.md")

@@ -536,3 +536,42 @@ def test_train_detector_from_samples_gives_a_working_model(tmp_path):
     assert rects and isinstance(rects[0], GraspRectangle)
     model.save(tmp_path / "m")
     assert DLSRDetector.load(tmp_path / "m").predict(_scene(seed=7)) == rects
+
+
+def test_table_fits_are_memoised_by_content_and_change_no_result():
+    from dlsr.detection import grid
+    from dlsr.detection.grid import table_surface
+
+    depth, valid, _ = _range_scene(2)
+    plain = np.zeros_like(depth)  # all missing: no table
+    grid._TABLE_FITS.clear()
+    grid._REGIONS.clear()
+    first = [table_plane_mask(depth, valid, return_surface=True), table_surface(depth, valid),
+             table_plane_mask(plain, plain > 0, return_surface=True)]
+    assert len(grid._TABLE_FITS._items) == 1 and len(grid._REGIONS._items) == 2
+    calls = []
+    real = grid._table_surface
+    try:
+        grid._table_surface = lambda *a, **k: calls.append(1) or real(*a, **k)
+        again = [table_plane_mask(depth, valid, return_surface=True),
+                 table_surface(depth, valid),
+                 table_plane_mask(plain, plain > 0, return_surface=True)]
+        assert calls == []  # every fit came from the memo
+        (r1, s1), t1, (r0, s0) = first
+        (r2, s2), t2, (r3, s3) = again
+        assert np.array_equal(r1, r2) and r1.any() and s2.tobytes() == s1.tobytes()
+        assert t2.tobytes() == t1.tobytes() and s0 is None and s3 is None and not r3.any()
+        # another image (one pixel changed), other options, or a generator: fitted again
+        moved = depth.copy()
+        moved[5, 5] += 0.01
+        table_surface(moved, valid)
+        table_surface(depth, valid, degree=2)
+        table_surface(depth, valid, random_state=np.random.default_rng(0))
+        assert len(calls) == 3
+    finally:
+        grid._table_surface = real
+    # the memo is what a fresh fit gives
+    grid._TABLE_FITS.clear()
+    grid._REGIONS.clear()
+    r4, s4 = table_plane_mask(depth, valid, return_surface=True)
+    assert np.array_equal(r4, r1) and s4.tobytes() == s1.tobytes()
