@@ -578,9 +578,9 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
     Each detector's trials go to ``root / "trials" / name`` (resumed trial by trial) and its
     summary into ``stages`` as ``"trials/<name>"`` once finished. The scenes are labelled by
     physics once, by the first detector's trials, into ``root / "labels"``
-    (:class:`graspsim.scene_labels.SceneLabels`), and the others read them. A baseline may be any name
-    :func:`graspsim.detectors.load_detector` takes, plug-ins (``package.module:NAME``,
-    entry-point names) included.
+    (:class:`graspsim.scene_labels.SceneLabels`), and the others read them. A baseline may be
+    any name :func:`graspsim.detectors.load_detector` takes, plug-ins
+    (``package.module:NAME``, entry-point names) included.
     """
     from .trials import TrialConfig, run_trials
 
