@@ -129,6 +129,14 @@ def _recognition_choice(path, learner: str, encoder: str):
     raise ValueError(f"{path}: no {learner}-{encoder} cell to take hyper-parameters from")
 
 
+def _train_saved(path, samples, options: dict) -> str:
+    """Train a DLSR detector (:func:`dlsr.detection.train_detector`) and save it at ``path``
+    (a task for the executor's workers); returns the files written."""
+    from dlsr.detection import train_detector
+
+    return [str(q) for q in train_detector(samples, **options).save(path)]
+
+
 def _detect_one(det, s, baselines, seed, base: dict) -> dict:
     """Detect on one labelled image and score it and the baselines by the rectangle metric."""
     from dlsr.detection import sample_observation
@@ -414,25 +422,32 @@ def detection_benchmark(
         executor = Executor("sequential", progress=False)
     ex = executor
     t_run = time.perf_counter()
+
+    def model_path(k):
+        return out / "models" / f"{train_key}_fold{k}"
+
+    # The folds' models first, side by side on the executor's workers (each fold is trained
+    # from its own seed, so where it runs changes nothing), then each fold's test images.
+    to_train = [k for k, (_, test) in enumerate(folds)
+                if model is None and any(samples[i].image_id not in done for i in test)
+                and not model_path(k).with_name(model_path(k).name + ".json").is_file()]
+    train_tasks = [(model_path(k),
+                    _fewer_positives([samples[i] for i in folds[k][0]], train_positives, seed + k)
+                    + extra_samples,
+                    dict(learner=learner, encoder=encoder, encoder_param=encoder_param, C=C,
+                         n_atoms=n_atoms, n_patches=n_patches, grid_negatives=grid_negatives,
+                         fit_grid=fit_grid, hard_negatives=hard_negatives,
+                         hard_rounds=hard_rounds, extra_patches=extra, physical=physical,
+                         random_state=seed + k, region=region))
+                   for k in to_train]
+    for _ in ex.imap(_train_saved, train_tasks, desc="fold models", star=True):
+        pass
     bar = tqdm(total=len(samples), initial=len(done), desc="detection", disable=not progress)
-    for k, (train, test) in enumerate(folds):
+    for k, (_, test) in enumerate(folds):
         todo = [i for i in test if samples[i].image_id not in done]
         if not todo:
             continue
-        mpath = out / "models" / f"{train_key}_fold{k}"
-        if model is not None:
-            fold_model = fixed
-        elif mpath.with_name(mpath.name + ".json").is_file():
-            fold_model = DLSRDetector.load(mpath)
-        else:
-            fold_model = train_detector(
-                _fewer_positives([samples[i] for i in train], train_positives, seed + k)
-                + extra_samples, learner=learner, encoder=encoder,
-                encoder_param=encoder_param, C=C, n_atoms=n_atoms, n_patches=n_patches,
-                grid_negatives=grid_negatives, fit_grid=fit_grid,
-                hard_negatives=hard_negatives, hard_rounds=hard_rounds, extra_patches=extra,
-                physical=physical, random_state=seed + k, region=region)
-            fold_model.save(mpath)
+        fold_model = fixed if model is not None else DLSRDetector.load(model_path(k))
         if options is not None:
             from .detector_options import build_real_detector
 

@@ -532,26 +532,28 @@ def run_job(config: RunConfig | None = None, out=None, resume: bool = True,
 
     # 4. The final detector, trained on every synthetic image (and, with physical features,
     #    the paper's model beside it for the dlsr-paper trials).
+    #    Both are trained side by side on the executor's workers (each from the same seed,
+    #    wherever it runs); a model's "seconds" is the stage's wall time until it was saved.
     model_path = root / "model" / "dlsr"
-    from dlsr.detection import train_detector
+    from .benchmarks import _train_saved
 
     models = [("model", model_path, config.physical, config.detector)]
     if config.physical:
         models.append(("model-paper", _paper_model_path(model_path, config), False, "dense"))
-    for key, path, physical, kind in models:
-        if stages.done(key):
-            continue
-        t0 = time.perf_counter()
-        model = train_detector(samples, learner=config.learner, encoder=config.encoder,
-                               C=config.C, n_atoms=config.n_atoms, n_patches=config.n_patches,
-                               random_state=seeds["model"], detector=kind,
-                               fit_grid=config.fit_grid, hard_negatives=config.hard_negatives,
-                               hard_rounds=config.hard_rounds,
-                               grid_negatives=config.grid_negatives, physical=physical)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        paths = model.save(path)
-        stages.finish(key, {"paths": [str(p) for p in paths],
-                            "seconds": time.perf_counter() - t0})
+    models = [m for m in models if not stages.done(m[0])]
+    model_path.parent.mkdir(parents=True, exist_ok=True)
+    tasks = [(path, samples, dict(learner=config.learner, encoder=config.encoder, C=config.C,
+                                  n_atoms=config.n_atoms, n_patches=config.n_patches,
+                                  random_state=seeds["model"], detector=kind,
+                                  fit_grid=config.fit_grid,
+                                  hard_negatives=config.hard_negatives,
+                                  hard_rounds=config.hard_rounds,
+                                  grid_negatives=config.grid_negatives, physical=physical))
+             for _, path, physical, kind in models]
+    t0 = time.perf_counter()
+    for (key, *_), paths in zip(models, ex.imap(_train_saved, tasks, desc="models", star=True),
+                                strict=True):
+        stages.finish(key, {"paths": paths, "seconds": time.perf_counter() - t0})
 
     # 5. Simulated grasp trials on the held-out test objects (config.trial_objects).
     trial_stage(root, config, stages, model_path, seeds["trials"], ex, progress)
