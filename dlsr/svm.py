@@ -53,6 +53,8 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from . import _threads
+
 __all__ = [
     "FeatureStandardizer",
     "SquaredHingeSVC",
@@ -502,6 +504,15 @@ def squared_hinge_fit(X, y_pm, Cs, *, tol=1e-6, max_iter=100, form="auto", warm_
         On bad shapes, NaN or infinite values, labels other than -1 and +1, a single class, a
         C that is not positive, or an unknown ``form``.
     """
+    # One BLAS thread: with more, the Gram and kernel products sum in another order and the
+    # solution moved in its last bits, so a model depended on where it was trained (the main
+    # process, a worker, the machine's core count).
+    with _threads.limit(1, user_api="blas"):
+        return _squared_hinge_fit(X, y_pm, Cs, tol=tol, max_iter=max_iter, form=form,
+                                  warm_start=warm_start, check_input=check_input)
+
+
+def _squared_hinge_fit(X, y_pm, Cs, *, tol, max_iter, form, warm_start, check_input):
     Cs = np.atleast_1d(np.asarray(Cs, dtype=np.float64))
     if Cs.ndim != 1 or not np.all(Cs > 0) or not np.all(np.isfinite(Cs)):
         raise ValueError(f"C must be positive and finite, got {Cs.tolist()}")

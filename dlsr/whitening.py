@@ -25,6 +25,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, OneToOneFeatureMixin, TransformerMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
+from . import _threads
 from ._dense import check_finite, standardize_rows
 
 __all__ = [
@@ -143,10 +144,14 @@ def fit_zca(X, M=None, epsilon: float = 0.1):
         )
     Xf = X[full].astype(np.float64)
     Xf -= Xf.mean(axis=0)
-    cov = (Xf.T @ Xf) / (nf - 1)
-    eig, V = np.linalg.eigh(cov)
-    eig = np.clip(eig, 0.0, None)
-    P = (V / np.sqrt(eig + epsilon)) @ V.T
+    # One BLAS thread: the covariance's product and the eigendecomposition sum in another
+    # order with two threads (P differed by 1e-13), so a model would depend on where it was
+    # trained (the main process, a worker, a machine with more cores). 0.1-0.3 s.
+    with _threads.limit(1, user_api="blas"):
+        cov = (Xf.T @ Xf) / (nf - 1)
+        eig, V = np.linalg.eigh(cov)
+        eig = np.clip(eig, 0.0, None)
+        P = (V / np.sqrt(eig + epsilon)) @ V.T
     P = (P + P.T) / 2
     return mean, P
 

@@ -310,3 +310,22 @@ def test_bad_input_is_a_clear_error():
         SquaredHingeSVC(solver="sgd").fit(X, y)
     with pytest.raises(ValueError, match="both\\s+positive and negative"):
         SquaredHingeSVC(solver="lbfgs").fit(X, np.ones(30))
+
+
+def test_the_solution_does_not_depend_on_the_blas_threads():
+    # with two threads the Gram and kernel products summed in another order: a detector
+    # trained in a worker (one thread) and in the main process differed in the last bits
+    from dlsr import _threads
+    from dlsr.svm import squared_hinge_fit
+
+    rng = np.random.default_rng(1)
+    for n, d in ((600, 2400), (3000, 400)):  # the kernel form, then the primal form
+        X = rng.normal(size=(n, d))
+        y = np.where(X[:, :5].sum(axis=1) + rng.normal(size=n) > 0, 1.0, -1.0)
+        fits = []
+        for threads in (1, 2):
+            with _threads.limit(threads, user_api="blas"):
+                fits.append(squared_hinge_fit(X, y, [1.0, 10.0]))
+        for a, b in zip(*fits, strict=True):
+            assert np.asarray(a[0]).tobytes() == np.asarray(b[0]).tobytes()
+            assert float(a[1]) == float(b[1])

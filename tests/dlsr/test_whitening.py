@@ -170,3 +170,20 @@ def test_real_patches_standardise_and_whiten(jacquard_view):
     eig = np.linalg.eigvalsh(np.cov(Z[full].astype(np.float64), rowvar=False))
     np.testing.assert_allclose(np.sort(np.linalg.eigvalsh(C)), np.sort(eig / (eig + 0.1)),
                                atol=1e-3)
+
+
+def test_zca_does_not_depend_on_the_blas_threads():
+    # with two threads the covariance's product sums in another order: a model trained in a
+    # worker (one thread) differed from the same model trained in the main process
+    from dlsr import _threads
+    from dlsr.whitening import fit_zca
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(20000, 288)).astype(np.float32)
+    X[:, :8] *= 30.0  # uneven scales, as whitened patches' channels
+    fits = []
+    for n in (1, 2):
+        with _threads.limit(n, user_api="blas"):
+            fits.append(fit_zca(X, np.ones(X.shape, bool)))
+    assert fits[0][1].tobytes() == fits[1][1].tobytes()
+    assert fits[0][0].tobytes() == fits[1][0].tobytes()
