@@ -338,6 +338,9 @@ def _run(args) -> int:
                 write_json_atomic(partial_path, partial, indent=1)
             row.clear()
             row["data"] = which
+            # kept before any command runs: a size stopped in its first command continues on
+            # the same data next time (its folders and partial timings are not thrown away)
+            write_json_atomic(timings_path, timings, indent=1)
         common = ["--data", str(data), "--format", "cornell", "--jobs", str(args.jobs),
                   "--seed", str(args.seed)]
         if "1" in tables and "table1" not in row:

@@ -213,3 +213,34 @@ def test_bench_scale_stopped_by_sigterm_says_so_in_one_line(monkeypatch, capsys)
     assert bench.main(["--sizes", "100"]) == 143  # the shell's code for SIGTERM, no traceback
     err = capsys.readouterr().err
     assert "terminated; the same command continues" in err and "Traceback" not in err
+
+
+def test_bench_scale_size_stopped_in_its_first_command_continues_it(tmp_path, monkeypatch):
+    import argparse
+    import json
+
+    bench = _bench_scale()
+    standin, out = tmp_path / "standin", tmp_path / "out"
+    standin.mkdir()
+    (standin / "standin.json").write_text(json.dumps({"reached": {"images": 885}}))
+    monkeypatch.setattr(bench.subprocess, "run", lambda *a, **k: None)  # the stand-in is made
+    monkeypatch.setattr(bench, "standin_subset", lambda src, dst, n: dst)
+    monkeypatch.setattr(bench, "data_fingerprint", lambda data, made: {"images": 100})
+    monkeypatch.setattr(bench, "table1_stages", lambda dest: {})
+    part = {"wall_s": 10.0, "cpu_s": 18.0, "peak_rss_mb": 900.0, "rss_trace_mb": [900.0]}
+
+    def stopped(cmd):  # the benchmark saved some cells in its folder, then SIGTERM
+        (out / "table1_100").mkdir(parents=True, exist_ok=True)
+        (out / "table1_100" / "cells.jsonl").write_text("{}\n")
+        raise bench.Interrupted(part)
+
+    args = argparse.Namespace(sizes="100", tables="1", standin=str(standin), out=str(out),
+                              standin_images=885, jobs=2, seed=0, detection_preset=None)
+    monkeypatch.setattr(bench, "timed", stopped)
+    with pytest.raises(bench.Interrupted):
+        bench._run(args)
+    monkeypatch.setattr(bench, "timed", lambda cmd: dict(part, wall_s=5.0))
+    assert bench._run(args) == 0
+    assert (out / "table1_100" / "cells.jsonl").exists()  # its saved cells were kept
+    t = json.loads((out / "timings.json").read_text())["100"]["table1"]
+    assert t["segments"] == 2 and t["wall_s"] == 15.0
