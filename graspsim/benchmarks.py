@@ -129,7 +129,7 @@ def _recognition_choice(path, learner: str, encoder: str):
     raise ValueError(f"{path}: no {learner}-{encoder} cell to take hyper-parameters from")
 
 
-def _train_saved(path, samples, options: dict) -> str:
+def _train_saved(path, samples, options: dict) -> list[str]:
     """Train a DLSR detector (:func:`dlsr.detection.train_detector`) and save it at ``path``
     (a task for the executor's workers); returns the files written."""
     from dlsr.detection import train_detector

@@ -243,7 +243,7 @@ def _table_surface(depth, valid, degree: int = 3, stride: int = 4, n_iter: int =
 
 
 def _table_from(depth, valid, C, sigma, tol):
-    """``(surface, table, sigma)`` of :func:`_table_surface` from the fitted polynomial's
+    """``(surface, table, sigma, C)`` of :func:`_table_surface` from the fitted polynomial's
     coefficients ``C`` (``surface = 1 / (Y^T C X)``, the polynomial evaluated separably on the
     full grid)."""
     H, W = depth.shape
@@ -274,7 +274,9 @@ def table_surface(depth, depth_valid=None, stride: int = 4, n_iter: int = 100,
         Metres (the fitted surface extrapolated over the whole image); None when fewer than 50
         pixels are valid or no table is found.
     """
-    _, _, fit = _fit_table(depth, depth_valid, stride, n_iter, tol, random_state, degree, band)
+    key = _fit_key(depth, depth_valid, stride, n_iter, tol, random_state, degree, band)
+    _, _, fit = _fit_table(depth, depth_valid, stride, n_iter, tol, random_state, degree, band,
+                           key)
     return None if fit is None else fit[0]
 
 
@@ -336,11 +338,11 @@ def _fit_key(depth, depth_valid, stride, n_iter, tol, random_state, degree, band
             int(random_state), int(degree), float(band))
 
 
-def _fit_table(depth, depth_valid, stride, n_iter, tol, random_state, degree, band):
+def _fit_table(depth, depth_valid, stride, n_iter, tol, random_state, degree, band, key):
     """``(depth as float64, valid, (surface, table, sigma, C) or None)``: the table fit shared
     by :func:`table_surface` and :func:`table_plane_mask` (None when fewer than 50 pixels are
-    valid or no table is found). Memoised by the images' content (:data:`_TABLE_FITS`)."""
-    key = _fit_key(depth, depth_valid, stride, n_iter, tol, random_state, degree, band)
+    valid or no table is found). Memoised in :data:`_TABLE_FITS` under ``key``
+    (:func:`_fit_key`, which its callers compute once; None: not memoised)."""
     depth = np.asarray(depth, dtype=np.float64)
     valid = valid_depth(depth, depth_valid)
     if valid.sum() < 50:
@@ -417,10 +419,13 @@ def table_plane_mask(depth, depth_valid=None, min_height: float = 0.006, stride:
     if int(degree) != degree or degree < 1:
         raise ValueError(f"degree must be an integer >= 1, got {degree!r}")
     key = _fit_key(depth, depth_valid, stride, n_iter, tol, random_state, degree, band)
-    depth, valid, fit = _fit_table(depth, depth_valid, stride, n_iter, tol, random_state,
-                                   degree, band)
     rkey = None if key is None else (key, float(min_height), int(min_area))
     bits = None if rkey is None else _REGIONS.get(rkey)
+    if bits is not None and not return_surface:  # the region alone: no fit needed
+        shape = np.shape(depth)
+        return np.unpackbits(bits, count=int(np.prod(shape))).reshape(shape).astype(bool)
+    depth, valid, fit = _fit_table(depth, depth_valid, stride, n_iter, tol, random_state,
+                                   degree, band, key)
     if bits is not None:
         region = np.unpackbits(bits, count=depth.size).reshape(depth.shape).astype(bool)
     else:

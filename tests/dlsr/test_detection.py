@@ -561,6 +561,7 @@ def test_table_fits_are_memoised_by_content_and_change_no_result():
         (r2, s2), t2, (r3, s3) = again
         assert np.array_equal(r1, r2) and r1.any() and s2.tobytes() == s1.tobytes()
         assert t2.tobytes() == t1.tobytes() and s0 is None and s3 is None and not r3.any()
+        assert np.array_equal(table_plane_mask(depth, valid), r1)  # the region alone
         # another image (one pixel changed), other options, or a generator: fitted again
         moved = depth.copy()
         moved[5, 5] += 0.01
