@@ -28,9 +28,12 @@ import numpy as np
 from PIL import Image, UnidentifiedImageError
 
 from .intrinsics import (  # noqa: F401  (check_camera_matrix: importable from here too)
+    CornellCamera,
     check_camera_matrix,
-    cornell_camera_matrix,
+    cornell_camera,
     jacquard_camera_matrix,
+    pcd_points_and_pixels,
+    range_to_depth,
     read_camera_matrix,
     read_pcd_points,
 )
@@ -51,6 +54,8 @@ __all__ = [
     "read_cornell_rectangles",
     "read_jacquard_grasps",
     "read_pcd_depth",
+    "pcd_depth",
+    "read_cornell_depth",
     "read_rgb",
     "read_gray",
     "read_depth_image",
@@ -180,13 +185,9 @@ def _check_shape(path: Path, arr: np.ndarray, shape: tuple[int, int], what: str)
         raise ValueError(f"{what} {path} has shape {arr.shape[:2]}, but the image is {shape}")
 
 
-def read_pcd_depth(path, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Depth image from a Cornell PCD v0.7 ASCII point cloud.
-
-    The depth of a pixel is the Euclidean norm of its point ``(x, y, z)`` (millimetres) divided by
-    1000, as the common preprocessing (``pcdXXXXd.tiff``) does, so both variants agree. Pixels
-    without a point (or with a non-finite point) are not inpainted: their depth is 0 and their
-    validity False.
+def read_pcd_depth(path, shape: tuple[int, int],
+                   camera: CornellCamera | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Depth image from a Cornell PCD v0.7 ASCII point cloud (:func:`pcd_depth` of the file).
 
     Parameters
     ----------
@@ -194,6 +195,9 @@ def read_pcd_depth(path, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray
         ``pcdXXXX.txt`` with fields including ``x y z`` and ``index`` (``row * W + col``).
     shape : (H, W)
         Image size; ``W`` is the row length of the index (640 in Cornell).
+    camera : CornellCamera or None
+        None: the range, as the common preprocessing computes it; else the depth along the
+        optical axis (see :func:`pcd_depth`).
 
     Returns
     -------
@@ -202,24 +206,96 @@ def read_pcd_depth(path, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray
     """
     path = Path(path)
     fields, data = read_pcd_points(path)
-    if not {"x", "y", "z", "index"} <= set(fields):
-        raise ValueError(f"point cloud {path}: FIELDS must include x y z index, got {fields}")
+    return pcd_depth(fields, data, shape, camera, what=f"point cloud {path}")
+
+
+def pcd_depth(fields, data, shape: tuple[int, int], camera: CornellCamera | None = None,
+              what: str = "point cloud") -> tuple[np.ndarray, np.ndarray]:
+    """Depth image of a parsed Cornell point cloud (:func:`dlsr.intrinsics.read_pcd_points`).
+
+    Without ``camera``, a pixel's depth is the Euclidean norm of its point ``(x, y, z)``
+    (millimetres) divided by 1000: the range, as the common preprocessing
+    (``pcdXXXXd.tiff``) computes it. With ``camera``, the depth along its optical axis, the
+    pipeline's convention (:mod:`dlsr.intrinsics`): the points' ``z`` in the camera frame when
+    the camera was fitted to the cloud (``camera.T_cam_cloud``), else the range converted with
+    ``camera.K`` (:func:`dlsr.intrinsics.range_to_depth`). Pixels without a point (or with a
+    non-finite one) are not inpainted: their depth is 0 and their validity False.
+
+    Parameters
+    ----------
+    fields : list of str
+    data : ndarray of shape (n, len(fields))
+    shape : (H, W)
+    camera : CornellCamera or None
+    what : str
+        Names the cloud in errors.
+
+    Returns
+    -------
+    depth : ndarray of shape (H, W), float32
+    valid : ndarray of shape (H, W), bool
+    """
     h, w = shape
     depth = np.zeros((h, w), dtype=np.float32)
     valid = np.zeros((h, w), dtype=bool)
+    xyz, pixels = pcd_points_and_pixels(fields, data, w, what)
     if len(data) == 0:
         return depth, valid
-    xyz = data[:, [fields.index("x"), fields.index("y"), fields.index("z")]]
     index = data[:, fields.index("index")]
     if np.any(index < 0) or np.any(index >= h * w) or np.any(index != np.round(index)):
-        raise ValueError(f"point cloud {path}: pixel index outside an image of shape {shape}")
-    dist = np.sqrt(np.sum(xyz**2, axis=1)) / 1000.0
+        raise ValueError(f"{what}: pixel index outside an image of shape {shape}")
+    T = None if camera is None else camera.T_cam_cloud
+    with np.errstate(invalid="ignore"):
+        dist = (np.sqrt(np.sum(xyz**2, axis=1)) if T is None
+                else xyz @ T[2, :3] + T[2, 3]) / 1000.0
     ok = np.isfinite(dist) & (dist > 0)
-    idx = index[ok].astype(np.int64)
-    rows, cols = idx // w, idx % w
+    cols, rows = pixels[ok].astype(np.int64).T
     depth[rows, cols] = dist[ok].astype(np.float32)
     valid[rows, cols] = True
+    if camera is not None and T is None:
+        depth = np.where(valid, range_to_depth(depth, camera.K), 0).astype(np.float32)
     return depth, valid
+
+
+def read_cornell_depth(image, depth_path, shape: tuple[int, int]):
+    """A Cornell image's depth along the optical axis and its camera, from its point cloud
+    (``pcdXXXX.txt``) or TIFF (``pcdXXXXd.tiff``).
+
+    The camera is :func:`dlsr.intrinsics.cornell_camera`'s when the image has a camera file or
+    a point cloud, else None (the Kinect estimate is not taken for a TIFF alone). A cloud's
+    depth is :func:`pcd_depth`'s; a TIFF holding the range (real Cornell beside its cloud or
+    fitted camera: ``camera.tiff_depth``) is converted with the camera's matrix, one holding
+    ``z`` (graspsim's datasets) or without camera is used as read.
+
+    Parameters
+    ----------
+    image : path-like
+        Any of the image's files, with a Cornell name (``pcdXXXXr.png``).
+    depth_path : path-like
+        The point cloud (``.txt``) or depth image to read.
+    shape : (H, W)
+
+    Returns
+    -------
+    depth : ndarray of shape (H, W), float32
+    valid : ndarray of shape (H, W), bool
+    camera : CornellCamera or None
+    """
+    depth_path = Path(depth_path)
+    p = Path(image)
+    stem = p.parent / p.name[:7]
+    cloud = read_pcd_points(depth_path) if depth_path.suffix == ".txt" else None
+    known = (cloud is not None or Path(f"{stem}camera.json").is_file()
+             or Path(f"{stem}.txt").is_file())
+    camera = cornell_camera(p, cloud=cloud) if known else None
+    if cloud is not None:
+        depth, valid = pcd_depth(*cloud, shape, camera, what=f"point cloud {depth_path}")
+        return depth, valid, camera
+    depth, valid = clean_depth(read_depth_image(depth_path))
+    _check_shape(depth_path, depth, shape, "depth image")
+    if camera is not None and camera.tiff_depth == "range":
+        depth = np.where(valid, range_to_depth(depth, camera.K), 0).astype(np.float32)
+    return depth, valid, camera
 
 
 def read_cornell_rectangles(path) -> list[GraspRectangle]:
@@ -397,14 +473,17 @@ def load_cornell(
 
     * ``pcdXXXXr.png``: 640x480 RGB;
     * depth, one of ``pcdXXXX.txt`` (PCD v0.7 ASCII point cloud, fields ``x y z rgb index`` in
-      millimetres, ``index = row * 640 + col``; see :func:`read_pcd_depth`) or ``pcdXXXXd.tiff``
-      (float32 metres from the common preprocessing; 0, negative or non-finite means missing);
+      millimetres in any frame, ``index = row * 640 + col``) or ``pcdXXXXd.tiff`` (float32
+      metres from the common preprocessing, the range; 0, negative or non-finite means
+      missing); :func:`read_cornell_depth` gives the depth along the optical axis where the
+      camera is known (:mod:`dlsr.intrinsics`);
     * ``pcdXXXXcpos.txt`` / ``pcdXXXXcneg.txt``: positive / negative rectangles (see
       :func:`read_cornell_rectangles`). An image without them loads with no rectangles (logged).
     * optionally ``pcdXXXXcamera.json`` (graspsim datasets, or the cache of a fit): the camera
-      matrix, ``sample.K``; without it, an image with its point cloud gets the matrix fitted
-      to the cloud (:func:`dlsr.intrinsics.cornell_camera_matrix`, cached beside it), one with
-      only the TIFF ``K=None``.
+      matrix, ``sample.K``; without it, an image with its point cloud gets the camera fitted
+      to the cloud in whatever frame its points are (:func:`dlsr.intrinsics.cornell_camera`,
+      cached beside it; a cloud that fits no camera gets the Kinect estimate and a logged
+      warning), one with only the TIFF ``K=None``.
 
     Parameters
     ----------
@@ -457,10 +536,9 @@ def load_cornell(
         shape = rgb.shape[:2]
         pcd, tiff = folder / f"{stem}.txt", folder / f"{stem}d.tiff"
         if depth_source in ("auto", "pcd") and pcd.is_file():
-            depth, valid = read_pcd_depth(pcd, shape)
+            depth, valid, camera = read_cornell_depth(rgb_path, pcd, shape)
         elif depth_source in ("auto", "tiff") and tiff.is_file():
-            depth, valid = clean_depth(read_depth_image(tiff))
-            _check_shape(tiff, depth, shape, "depth image")
+            depth, valid, camera = read_cornell_depth(rgb_path, tiff, shape)
         else:
             wanted = {"auto": f"{pcd.name} or {tiff.name}", "pcd": pcd.name, "tiff": tiff.name}
             raise FileNotFoundError(
@@ -490,8 +568,7 @@ def load_cornell(
             positives=rects["cpos"],
             negatives=rects["cneg"],
             source=rgb_path,
-            K=(cornell_camera_matrix(rgb_path)[0]
-               if (folder / f"{stem}camera.json").is_file() or pcd.is_file() else None),
+            K=None if camera is None else camera.K,
         )
         samples.append(resize_sample(sample, scale) if scale != 1.0 else sample)
     ids = [s.image_id for s in samples]

@@ -27,9 +27,12 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
     rgb : path
         Colour image (PNG, ...).
     depth : path
-        Depth image (float TIFF in metres, or ``.npy``); values <= 0 or non-finite are missing.
-        Cornell's ``pcdXXXXd.tiff`` are metres (the distance to the camera, 0.76 to 2.03 m in
-        the two sample images).
+        Depth image (float TIFF in metres along the optical axis, or ``.npy``); values <= 0 or
+        non-finite are missing. Or a Cornell point cloud ``pcdXXXX.txt`` in any frame. A
+        Cornell image's depth is read as :func:`dlsr.datasets.read_cornell_depth` reads it
+        (the cloud's ``z`` in the fitted camera frame; a ``pcdXXXXd.tiff``, the range, converted
+        where the camera is known from its cloud or camera file), so ``graspsim detect`` sees
+        what :func:`dlsr.datasets.load_cornell` gives.
     mask, background : path or None
         Object mask (non-zero = object) or background image for the object region. With
         neither, the object is found from depth alone (:func:`~dlsr.detection.table_plane_mask`).
@@ -65,10 +68,19 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
     """
     if not isinstance(model, DLSRDetector):
         model = DLSRDetector.load(model)
-    from ..datasets import clean_depth, read_depth_image, read_gray, read_rgb
+    from ..datasets import clean_depth, read_cornell_depth, read_depth_image, read_gray, read_rgb
 
     rgb_arr = read_rgb(rgb)
-    d, valid = clean_depth(read_depth_image(depth))
+    cornell = next((p for p in (Path(rgb), Path(depth))
+                    if p.name.startswith("pcd") and p.name[3:7].isdigit()), None)
+    camera = None
+    if cornell is not None:
+        d, valid, camera = read_cornell_depth(cornell, depth, rgb_arr.shape[:2])
+    elif Path(depth).suffix == ".txt":
+        raise ValueError(f"point cloud {depth}: a Cornell point cloud needs a Cornell file name "
+                         "(pcdXXXX.txt, or the image's pcdXXXXr.png) to find its camera")
+    else:
+        d, valid = clean_depth(read_depth_image(depth))
     if d.shape != rgb_arr.shape[:2]:
         raise ValueError(f"depth {depth} has shape {d.shape}, the image {rgb} "
                          f"{rgb_arr.shape[:2]}")
@@ -81,10 +93,10 @@ def detect_files(model, rgb, depth, mask=None, background=None, depth_units: flo
                              "20 m); millimetres need --depth-units 0.001")
     if mask is not None:
         obs["mask"] = read_gray(mask) > 0
-    if K is None and Path(rgb).name.startswith("pcd") and Path(rgb).name[3:7].isdigit():
-        from ..intrinsics import cornell_camera_matrix
+    if K is None and cornell is not None:
+        from ..intrinsics import cornell_camera
 
-        K = cornell_camera_matrix(rgb)[0]
+        K = (camera if camera is not None else cornell_camera(cornell)).K
     if K is not None:
         from ..datasets import check_camera_matrix, read_camera_matrix
 

@@ -20,7 +20,8 @@ def register(subparsers) -> None:
                    help="saved model (PATH.npz + PATH.json, e.g. from benchmark --save-model)")
     p.add_argument("--rgb", required=True, help="colour image")
     p.add_argument("--depth", required=True,
-                   help="depth image: float TIFF in metres (or .npy); <= 0 means missing")
+                   help="depth image: float TIFF in metres (or .npy), <= 0 means missing; or a "
+                        "Cornell point cloud pcdXXXX.txt in any frame (its camera is fitted)")
     p.add_argument("--depth-units", type=float, default=1.0,
                    help="multiplies the depth values to give metres (0.001 for millimetres)")
     p.add_argument("--mask", default=None, help="object mask image (non-zero = object)")

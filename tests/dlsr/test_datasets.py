@@ -191,17 +191,32 @@ def test_pcd_variant_ids_objects_and_rectangles(pcd_samples, pcd_root):
         assert s.mask is None
 
 
-def test_pcd_depth_is_norm_over_1000_and_not_inpainted(pcd_samples):
+def _z_of_range(depth):
+    """The fixture's range (metres, along each pixel's ray) as depth along the optical axis."""
+    rows, cols = np.mgrid[0:H, 0:W]
+    return depth / np.sqrt(((cols - 320) / FOCAL) ** 2 + ((rows - 240) / FOCAL) ** 2 + 1)
+
+
+def test_pcd_depth_is_z_along_the_optical_axis_and_not_inpainted(pcd_samples):
     for s in pcd_samples:
         rgb, depth, valid = _scene(s.image_id)
         np.testing.assert_array_equal(s.rgb, rgb)
         assert s.depth.dtype == np.float32 and s.depth_valid.dtype == bool
         assert s.depth.shape == (H, W)
         np.testing.assert_array_equal(s.depth_valid, valid)
-        assert np.abs(s.depth[valid] - depth[valid]).max() < 2e-6
+        # the cloud holds the range (the fixture's depth); the pipeline's depth is z
+        assert np.abs(s.depth[valid] - _z_of_range(depth)[valid]).max() < 2e-6
+        assert np.abs(s.depth[valid] - depth[valid]).max() > 0.01  # not the range
         assert np.all(s.depth[~valid] == 0)  # holes stay holes
         assert not s.depth_valid[200:210, 250:270].any()
         assert np.isfinite(s.depth).all()
+
+
+def test_read_pcd_depth_without_camera_is_the_range(pcd_root):
+    depth, valid = read_pcd_depth(pcd_root / "01" / "pcd0100.txt", (H, W))
+    _rgb, expected, ok = _scene("0100")
+    np.testing.assert_array_equal(valid, ok)
+    assert np.abs(depth[ok] - expected[ok]).max() < 2e-6
 
 
 def test_nan_rectangles_dropped_with_file_and_line_logged(pcd_root, caplog):
@@ -218,16 +233,21 @@ def test_point_cloud_and_tiff_variants_agree(tmp_path, pcd_samples):
     tiff_samples = load_cornell(write_fixture(tmp_path / "t", "tiff"))
     assert [s.image_id for s in tiff_samples] == [s.image_id for s in pcd_samples]
     for a, b in zip(pcd_samples, tiff_samples, strict=True):
-        np.testing.assert_array_equal(a.depth, b.depth)
+        # a TIFF alone has no camera: its range is used as read, and K is unknown
+        assert b.K is None
+        np.testing.assert_allclose(b.depth, _scene(a.image_id)[1] * a.depth_valid, atol=2e-6)
         np.testing.assert_array_equal(a.depth_valid, b.depth_valid)
         np.testing.assert_array_equal(a.rgb, b.rgb)
         np.testing.assert_array_equal(rects_to_array(a.positives), rects_to_array(b.positives))
         assert a.object_id == b.object_id
-    # With both files present, "auto" reads the point cloud and "tiff" the TIFF: same numbers.
+    # With both files present, "auto" and "pcd" read the point cloud; "tiff" reads the TIFF's
+    # range and converts it with the camera fitted to the cloud: the same depths.
     both = write_fixture(tmp_path / "b", "both")
     for src in ("auto", "pcd", "tiff"):
         for a, b in zip(pcd_samples, load_cornell(both, depth_source=src), strict=True):
-            np.testing.assert_array_equal(a.depth, b.depth)
+            np.testing.assert_allclose(a.depth, b.depth, atol=2e-6)
+            np.testing.assert_array_equal(a.depth_valid, b.depth_valid)
+            np.testing.assert_allclose(a.K, b.K)
 
 
 def test_flat_layout_equals_folders(tmp_path, pcd_samples):

@@ -300,3 +300,45 @@ def test_detect_without_intrinsics_on_other_files_says_what_to_give(saved_model,
     code = main(["detect", "--model", str(path), "--rgb", str(rgb), "--depth", str(depth),
                  "--mask", str(mask)])
     assert code == 0
+
+
+def test_detect_reads_a_tilted_forward_left_up_point_cloud(cornell_samples_root,
+                                                           jacquard_physical_model, tmp_path,
+                                                           capsys):
+    """A real Cornell image with its point cloud written as real Cornell clouds are
+    (forward-left-up, tilted 25 deg with the camera, millimetres, ``index = row * 640 +
+    col``), made from the image's preprocessed range: ``graspsim detect --depth pcd0100.txt``
+    fits the camera and finds what ``--depth pcd0100d.tiff`` (the range, converted with that
+    camera) finds, with the model that needs the camera (``--preset all``)."""
+    from dlsr.datasets import clean_depth, read_depth_image
+    from dlsr.intrinsics import camera_matrix, read_camera_matrix
+
+    for name in ("pcd0100r.png", "pcd0100d.tiff"):
+        (tmp_path / name).write_bytes((cornell_samples_root / name).read_bytes())
+    rng_m, valid = clean_depth(read_depth_image(tmp_path / "pcd0100d.tiff"))
+    K0 = camera_matrix(580.0, 578.0, 322.0, 236.0)
+    rows, cols = np.nonzero(valid)
+    ray = np.linalg.solve(K0, np.stack([cols, rows, np.ones_like(rows)]).astype(float)).T
+    xyz = rng_m[rows, cols, None] * 1000.0 * ray / np.linalg.norm(ray, axis=1, keepdims=True)
+    a = np.radians(25.0)
+    tilt = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    flu = xyz @ (tilt @ np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]])).T
+    header = ("# .PCD v.7 - Point Cloud Data file format\nVERSION .7\nFIELDS x y z rgb index\n"
+              "SIZE 4 4 4 4 4\nTYPE F F F F U\nCOUNT 1 1 1 1 1\n"
+              f"WIDTH {len(rows)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(rows)}\n"
+              "DATA ascii\n")
+    lines = [f"{x:.4f} {y:.4f} {z:.4f} 0 {i}\n"
+             for (x, y, z), i in zip(flu, rows * 640 + cols, strict=True)]
+    (tmp_path / "pcd0100.txt").write_text(header + "".join(lines))
+    found = []
+    for depth in ("pcd0100.txt", "pcd0100d.tiff"):
+        code = main(["detect", "--model", str(jacquard_physical_model), "--rgb",
+                     str(tmp_path / "pcd0100r.png"), "--depth", str(tmp_path / depth),
+                     "--top-k", "1", "--preset", "all"])
+        out = capsys.readouterr().out
+        assert code == 0, out
+        found.append([json.loads(out)["rectangles"][0][k] for k in ("x", "y", "theta", "w")])
+    np.testing.assert_allclose(found[0], found[1], atol=1e-3)
+    K = read_camera_matrix(tmp_path / "pcd0100camera.json")  # the fit, cached
+    np.testing.assert_allclose(K[[0, 1], [0, 1]], [580.0, 578.0], rtol=1e-3)
+    np.testing.assert_allclose(K[:2, 2], [322.0, 236.0], atol=0.5)
