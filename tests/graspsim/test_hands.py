@@ -309,3 +309,20 @@ def test_a_short_trial_with_each_new_hand(tmp_path, hand):
     assert s["n"] == 2 and 0 <= s["successes"] <= 2
     assert campaign_execution_params(out) == params
     assert f"gripper.hand = {hand}" in (out / "summary.md").read_text()
+
+
+def test_hands_picture_draws_each_hand_at_one_scale():
+    from graspsim.trialviz import hands_picture
+
+    img = hands_picture(["builtin", "wsg50"], spacing=0.2, px_per_mm=0.5, height=0.3)
+    assert img.shape == (150, 200, 3) and img.dtype == np.uint8
+    drawn = np.any(np.abs(img.astype(int) - img[0, 0].astype(int)) > 30, axis=2)
+    body = drawn[40:130]  # between the names and the ruler
+    # the widest part of each hand at 0.5 px per mm: the built-in palm (110 mm), the WSG 50's
+    # open jaws with the fingers' roots (110 mm between the pads + 2 x 23 mm)
+    for half, mm in ((body[:, :100], BUILTIN.palm_length * 1000),
+                     (body[:, 100:], WSG50.max_opening * 1000 + 46)):
+        cols = np.flatnonzero(half.any(axis=0))
+        assert cols[-1] - cols[0] + 1 == pytest.approx(mm * 0.5, abs=2)
+    with pytest.raises(ValueError, match="unknown gripper"):
+        hands_picture(["robotiq"])
