@@ -25,26 +25,26 @@ grasp force is each hand's own (:func:`graspsim.gripper.hand_params`).
     Robotics / Schunk, 05.00, sections 3.1-3.2) and Schunk's WSG 050-110-B product data. The
     housing mesh measures 146 x 50 x 72.5 mm, as the manual says;
   - the base jaws (18 mm along the closing direction, 30 mm across, up to 96.5 mm above the
-    mounting face) and the fingers (a 20 mm wide, 11 mm thick finger with a 3 mm pad at its
-    last 17 mm, reaching 153.5 mm above the mounting face): measured on ``pybullet_data``'s
+    mounting face) and the fingers (a 20 mm wide, 11 mm thick finger with a 3 mm pad over its
+    last 16.5 mm, reaching 153.5 mm above the mounting face): measured on ``pybullet_data``'s
     meshes placed as its ``wsg50_one_motor_gripper_new_free_base.sdf`` places them. The
     fingers are set 3 mm further out than that model so that their pads, not the jaws, open
     the datasheet's 110 mm (pybullet_data's fingers stand 3 mm proud of the jaws: 104 mm);
   - collision shapes are boxes fitted to those meshes (as the SDF's own finger collisions are
     boxes: the convex hull pybullet would take of the L-shaped finger mesh fills its notch).
 
-  Its grasp force is :data:`WSG50_FORCE`.
+  Its grasp force is :data:`WSG50_FORCE`; the masses (1.0 kg housing, 0.1 kg per finger)
+  add up to the manual's 1.2 kg.
 * ``"robotiq-2f85"``: the Robotiq 2F-85, modelled from its published dimensions as a
   **parallel approximation** of its linkage (boxes written as a URDF, no mesh): two pads that
   slide straight along the closing direction. Its numbers:
 
   - stroke 85 mm and grip force 20-235 N: Robotiq's 2F-85 specifications (the *2F-85 &
-    2F-140 Instruction Manual*, section 6.1; the same figures in its product sheet, with
-    0.925 kg);
-  - the pads, 22 mm wide, 37.5 mm long and 8 mm thick, and the fingertips 149.4 mm beyond
-    the base's coupling face (88.5 mm below the spring links' pivots, 60.9 mm above the
-    base) with the fingers open: MuJoCo Menagerie's ``robotiq_2f85`` model (Zakka et al.,
-    2022), which its authors derived from Robotiq's published CAD files;
+    2F-140 Instruction Manual*, section 6.1, and its product sheet; about 0.9 kg);
+  - the pads, 22 mm wide, 37.5 mm long and 8 mm thick, and the fingertips 88.5 mm beyond
+    the spring links' pivots with the fingers open (the pivots 71.7 mm from the coupling's
+    face, so the fingertips 160.2 mm): MuJoCo Menagerie's ``robotiq_2f85`` model (Zakka et
+    al., 2022), which its authors derived from Robotiq's published CAD files;
   - estimates (no published figure found): the finger behind each pad (the follower link)
     as a 10 mm thick box over the finger's length below the pivots, and the housing as an
     85 x 60 mm box (enclosing the drivers' pivots, 61.2 mm apart in the Menagerie model)
@@ -149,6 +149,8 @@ FRANKA = HandGeometry(max_opening=0.08, tip_offset=0.01,
 # full section from 76 mm to 96.5 mm; fingers (WSG-FMF.stl, placed 23 mm higher than the mesh
 # file's frame) from 80.5 mm to their tips at 153.5 mm: a 20 mm x 30 mm root to 103 mm, then
 # 11 mm thick and 20 mm wide with a 3 mm pad over the last 16.5 mm.
+# The palm's face is taken at the jaws' ends (the lowest part above the fingers), its footprint
+# the housing's.
 _WSG_TIP_Z = 0.1535
 _WSG_TCP_Z = _WSG_TIP_Z - 0.01  # tips 1 cm beyond the TCP
 _WSG_JAW_END_Z = 0.0965
