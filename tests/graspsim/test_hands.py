@@ -326,3 +326,29 @@ def test_hands_picture_draws_each_hand_at_one_scale():
         assert cols[-1] - cols[0] + 1 == pytest.approx(mm * 0.5, abs=2)
     with pytest.raises(ValueError, match="unknown gripper"):
         hands_picture(["robotiq"])
+
+
+def test_new_hands_in_the_environment_clutter_rounds_and_run_configs(tmp_path, easy_objects):
+    from graspsim.declutter import run_rounds
+    from graspsim.pipeline import RunConfig
+
+    env = gym.make("graspsim/Grasp-v0", objects=[s for s in easy_objects
+                                                 if s.name == "can_tall"],
+                   gripper="wsg50")
+    try:
+        assert env.unwrapped._params.gripper == hand_params("wsg50")
+        env.reset(seed=0)
+        _, reward, terminated, _, step = env.step(env.action_space.sample())
+        assert terminated and reward in (0.0, 1.0) and "failure_reason" in step
+    finally:
+        env.close()
+    params = ExecutionParams.with_hand("robotiq-2f85")
+    out = tmp_path / "rounds"
+    s = run_rounds("mask-pca", easy_objects, n=1, seed=1, out=out, params=params,
+                   config=TrialConfig(n_candidates=0, n_objects=2, scene="packed"))
+    assert s["rounds"] == 1 and s["attempts"] >= 1
+    assert campaign_execution_params(out) == params
+    assert RunConfig(gripper="robotiq-2f85").validated().execution_params() == params
+    with pytest.raises(ValueError, match="gripper must be one of builtin, franka, wsg50, "
+                                         "robotiq-2f85"):
+        RunConfig(gripper="robotiq").validated()
