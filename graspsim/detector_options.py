@@ -182,7 +182,7 @@ def build_real_detector(model, options: DetectorOptions, top_k: int = 5, region:
         object_region`).
     rescore, coarse_to_fine :
         Dense grid search only.
-    hand : {"builtin", "franka"}
+    hand : {"builtin", "franka", "wsg50", "robotiq-2f85"}
         The gripper whose geometry the gripper-aware check uses
         (:func:`graspsim.detectors.gripper_aware`).
 

@@ -343,7 +343,7 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
         Metres. Judge each grasp as a harness with ``ExecutionParams(min_grip=...)`` executes it:
         fingers that would meet a surface stop short of it if they still grip this much
         (:func:`graspsim.grasp.settle_fingers`); None (the harness's default): they do not.
-    hand : {"builtin", "franka"}
+    hand : {"builtin", "franka", "wsg50", "robotiq-2f85"}
         The gripper's hand, whose geometry (opening, fingers, palm) is checked
         (:mod:`graspsim.hands`): the harness's ``ExecutionParams.gripper.hand``.
 
@@ -421,7 +421,7 @@ class GripperAwareDetector:
         See :func:`executable`.
     min_grip : float or None
         See :func:`executable`: set it to the harness's ``ExecutionParams.min_grip``.
-    hand : {"builtin", "franka"}
+    hand : {"builtin", "franka", "wsg50", "robotiq-2f85"}
         See :func:`executable`: set it to the harness's ``ExecutionParams.gripper.hand``.
     """
 
@@ -463,7 +463,8 @@ class GripperAwareDetector:
         from dlsr.rectangles import array_to_rects
 
         ok = executable(array_to_rects(det.rects), obs, tolerance=self.tolerance,
-                        unseen_surface=self.unseen_surface, min_grip=self.min_grip)
+                        unseen_surface=self.unseen_surface, min_grip=self.min_grip,
+                        hand=getattr(self, "hand", "builtin"))
         keep = np.flatnonzero(ok)[: self.keep]
         reason = None if len(keep) else (f"none of the {len(det.rects)} best rectangles is "
                                          "executable by this gripper")
@@ -501,7 +502,7 @@ def gripper_aware(detector, top_k: int = 40, keep: int = 5, unseen_surface: bool
         The fingers must also miss the object's unseen surface (:func:`executable`).
     min_grip : float or None
         As the harness's ``ExecutionParams.min_grip`` (:func:`executable`).
-    hand : {"builtin", "franka"}
+    hand : {"builtin", "franka", "wsg50", "robotiq-2f85"}
         As the harness's ``ExecutionParams.gripper.hand``: its largest opening bounds the
         search and its geometry is checked (:func:`executable`).
 

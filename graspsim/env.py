@@ -77,7 +77,7 @@ class GraspEnv(gym.Env):
     scene : {"drop", "isolated", "packed", "pile"}
         How the objects are put on the table (:mod:`graspsim.scenes`); ``"drop"``, the
         default, is the scene of earlier versions.
-    gripper : {"builtin", "franka"} or None
+    gripper : {"builtin", "franka", "wsg50", "robotiq-2f85"} or None
         The hand (:mod:`graspsim.hands`; :func:`graspsim.gripper.hand_params`), replacing
         ``execution``'s gripper parameters; None: those of ``execution`` (the built-in hand by
         default).

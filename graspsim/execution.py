@@ -103,8 +103,9 @@ class ExecutionParams:
 
     @classmethod
     def with_hand(cls, hand: str = "builtin", **fields) -> ExecutionParams:
-        """The parameters with ``hand``'s gripper (:func:`graspsim.gripper.hand_params`:
-        ``"builtin"`` or ``"franka"``; an unknown name is a ValueError) and ``fields`` set."""
+        """The parameters with ``hand``'s gripper (:func:`graspsim.gripper.hand_params`: a name
+        of :data:`graspsim.hands.HAND_NAMES`; an unknown name is a ValueError) and ``fields``
+        set."""
         from .gripper import hand_params
 
         return cls(gripper=hand_params(hand), **fields)

@@ -6,7 +6,7 @@ alone on the table (half of the time upright with a random yaw, otherwise in a u
 orientation, as :func:`graspsim.scene.make_scene` drops every trial's object) and left to
 settle, the scene is rendered, and the dense candidates of
 :func:`graspsim.labelling.dense_candidates` (a lattice over the mask, every 15 degrees, within
-the gripper's reach; at most :data:`BUDGET`, in random order) are executed by
+the hand's reach; at most :data:`BUDGET`, in random order) are executed by
 :func:`graspsim.labelling.label_rectangles` until one succeeds. The box rule it replaces
 (an extent of the bounding box against the 8 cm opening) calls a blob wider than 8 cm in its
 box not graspable even when its parts are narrow.
@@ -34,7 +34,7 @@ import numpy as np
 from dlsr.records import read_json, write_json_atomic
 
 from .execution import ExecutionParams
-from .gripper import MAX_OPENING, GripperParams
+from .gripper import GripperParams
 from .labelling import dense_candidates, label_rectangles
 from .object_sets import _fingerprint, as_object_set
 from .objects import ObjectSpec, assets_dir
@@ -79,10 +79,12 @@ def gripper_key(params: ExecutionParams | None = None, gripper: dict | None = No
     params : ExecutionParams or None
         The harness's (default: its defaults).
     gripper : dict or None
-        Another gripper's geometry and forces (default: the built-in gripper's
-        ``max_opening`` and :class:`graspsim.gripper.GripperParams`).
+        Another gripper's geometry and forces (default: the largest opening of ``params``'s
+        hand, 8 cm for the built-in and Franka hands, and the default
+        :class:`graspsim.gripper.GripperParams`; the hand and its force are in ``execution``).
     """
-    g = ({"name": "parallel_jaw", "max_opening": MAX_OPENING, **asdict(GripperParams())}
+    hand = (ExecutionParams() if params is None else params).gripper.geometry
+    g = ({"name": "parallel_jaw", "max_opening": hand.max_opening, **asdict(GripperParams())}
          if gripper is None else dict(gripper))
     return {"gripper": g, "execution": asdict(ExecutionParams() if params is None else params),
             "budget": BUDGET, "seed": SEED}
@@ -153,8 +155,9 @@ def pose_outcome(sim, spec: ObjectSpec, pose: int, params: ExecutionParams | Non
     bodies = build_scene(sim, scene)
     frame = capture(sim, scene, bodies, np.random.default_rng(cam_ss))
     rng = np.random.default_rng(cand_ss)
+    hand = (ExecutionParams() if params is None else params).gripper.geometry
     cands = dense_candidates(frame.segmentation, bodies.objects, rng, frame.depth_clean,
-                             frame.intrinsics)
+                             frame.intrinsics, max_opening=hand.max_opening)
     order = rng.permutation(len(cands))[:budget]
     executed = 0
     for start in range(0, len(order), CHUNK):

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .hands import BUILTIN, check_hand, hand_geometry, hand_urdf
+from .hands import BUILTIN, check_hand, hand_force, hand_geometry, hand_urdf
 
 __all__ = ["Gripper", "GripperParams", "gripper_urdf", "hand_params", "pose_from_matrix",
            "matrix_from_pose"]
@@ -34,7 +34,7 @@ PALM_WIDTH = BUILTIN.palm_width  #: the palm's width across the closing directio
 
 def gripper_urdf(hand: str = "builtin"):
     """Path of a hand's URDF: the built-in one resolved from the installed assets (never the
-    cwd), the Franka hand's written on first use (:func:`graspsim.hands.hand_urdf`)."""
+    cwd), the others written on first use (:func:`graspsim.hands.hand_urdf`)."""
     return hand_urdf(hand)
 
 
@@ -52,9 +52,10 @@ class GripperParams:
         Lateral friction coefficient of the pads.
     arm_force : float
         N, ``maxForce`` of the base constraint (what the "arm" can push or lift).
-    hand : {"builtin", "franka"}
-        Which hand (:mod:`graspsim.hands`): its URDF and geometry. ``"franka"`` is meant with
-        ``finger_force`` :data:`graspsim.hands.FRANKA_FORCE` (:func:`hand_params`).
+    hand : {"builtin", "franka", "wsg50", "robotiq-2f85"}
+        Which hand (:mod:`graspsim.hands`): its URDF and geometry. Each but the built-in one
+        is meant with its own ``finger_force`` (:func:`graspsim.hands.hand_force`;
+        :func:`hand_params`).
     """
 
     finger_force: float = 40.0
@@ -73,19 +74,19 @@ class GripperParams:
 
 
 def hand_params(hand: str = "builtin") -> GripperParams:
-    """The gripper parameters of a hand: the defaults, with the Franka hand's documented grasp
-    force (:data:`graspsim.hands.FRANKA_FORCE`) for ``"franka"``.
+    """The gripper parameters of a hand: the defaults, with the hand's documented grasp force
+    (:func:`graspsim.hands.hand_force`: the Franka hand's 70 N, the WSG 50's 80 N, the
+    Robotiq 2F-85's 235 N) for any but the built-in hand.
 
     Raises
     ------
     ValueError
         One line, for an unknown hand.
     """
-    from .hands import FRANKA_FORCE
-
-    if check_hand(hand) == "franka":
-        return GripperParams(hand="franka", finger_force=FRANKA_FORCE)
-    return GripperParams()
+    force = hand_force(hand)
+    if force is None:
+        return GripperParams()
+    return GripperParams(hand=hand, finger_force=force)
 
 
 def matrix_from_pose(client, position, quaternion) -> np.ndarray:

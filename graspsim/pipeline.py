@@ -129,7 +129,7 @@ class RunConfig:
         How the objects of the dataset and of the trials are put on the table
         (:mod:`graspsim.scenes`); packed and pile scenes have 5 objects (VGN, GIGA). Default
         ``"drop"``: one object dropped at a random pose, the scene of the README's figures.
-    gripper : {"builtin", "franka"}
+    gripper : {"builtin", "franka", "wsg50", "robotiq-2f85"}
         The hand that labels the dataset, executes the trials and that DLSR's gripper-aware
         search judges rectangles for (:mod:`graspsim.hands`); default the built-in one.
     trials : int

@@ -87,16 +87,18 @@ def objects_per_scene(args: argparse.Namespace, clutter: bool = False) -> int:
 
 
 def add_gripper_arg(p: argparse.ArgumentParser) -> None:
-    """``--gripper builtin|franka`` (:mod:`graspsim.hands`), one definition for every command
-    that executes grasps."""
+    """``--gripper builtin|franka|wsg50|robotiq-2f85`` (:mod:`graspsim.hands`), one
+    definition for every command that executes grasps."""
     from graspsim.hands import HAND_NAMES
 
     p.add_argument("--gripper", default="builtin", choices=list(HAND_NAMES),
-                   help="the hand: builtin (default: graspsim's parallel jaw) or franka (the "
-                        "Franka Emika hand of pybullet_data's franka_panda, floating as in "
-                        "VGN/GIGA: 8 cm stroke, 70 N grasp force); labelling, --gripper-aware "
-                        "and execution use its geometry; recorded in the output's "
-                        "configuration")
+                   help="the hand: builtin (default: graspsim's parallel jaw, 8 cm stroke), "
+                        "franka (the Franka Emika hand of pybullet_data's franka_panda, "
+                        "floating as in VGN/GIGA: 8 cm stroke, 70 N grasp force), wsg50 (the "
+                        "Schunk WSG 50 of pybullet_data: 110 mm stroke, 80 N) or robotiq-2f85 "
+                        "(the Robotiq 2F-85 as two parallel pads: 85 mm stroke, 235 N); "
+                        "labelling, --gripper-aware and execution use its geometry; recorded "
+                        "in the output's configuration")
 
 
 def object_set_from_args(args: argparse.Namespace):
