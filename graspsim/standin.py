@@ -40,6 +40,7 @@ __all__ = [
     "standin_objects",
     "standin_subset",
     "thin_labels",
+    "usable_scenes",
 ]
 
 log = logging.getLogger(__name__)
@@ -207,6 +208,24 @@ def standin_subset(src, dst, n_images: int) -> Path:
     return dst
 
 
+def usable_scenes(samples) -> list:
+    """The labelled scenes a stand-in keeps, in order: those with at least one positive and one
+    negative rectangle. The stand-in's image ``k`` is the ``k``-th of them (its first
+    ``n_images``), so the images of any size are found from a partly labelled folder too.
+
+    Parameters
+    ----------
+    samples : list of dlsr.datasets.GraspSample
+        The labelled dataset (``OUT/labelled``, :func:`dlsr.datasets.load_cornell`), in
+        scene order.
+
+    Returns
+    -------
+    list of dlsr.datasets.GraspSample
+    """
+    return [s for s in samples if s.positives and s.negatives]
+
+
 def make_cornell_standin(out, n_images: int = CORNELL["images"],
                          n_objects: int = CORNELL["objects"],
                          positives: int = CORNELL["positives"],
@@ -264,7 +283,7 @@ def make_cornell_standin(out, n_images: int = CORNELL["images"],
                              n_candidates=n_candidates, n_jobs=n_jobs, executor=executor,
                              progress=progress)
         samples = load_cornell(labelled)
-        usable = [s for s in samples if s.positives and s.negatives]
+        usable = usable_scenes(samples)
         if len(usable) >= n_images or n_scenes >= limit:
             break
         short = n_images - len(usable)
