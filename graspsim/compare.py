@@ -537,8 +537,38 @@ def short_labels(names, folders) -> list[str]:
     return labels
 
 
+def _compact_names(folders: list[dict]) -> list[str]:
+    """Detector names with their options (``mod:Det(model=a.pt,top_k=5)``) cut to the options
+    that differ among the compared folders of the same detector: none when it is compared
+    once."""
+    from .detectors import detector_label
+
+    bases, options = [], []
+    for f in folders:
+        name, opts = str(f["name"]), (f.get("config") or {}).get("detector_options")
+        if isinstance(opts, dict) and opts and "(" in name:
+            suffix = name[name.rindex(")") + 1:]  # "+aware"
+            bases.append(name[: name.index("(")] + suffix)
+            options.append(opts)
+        else:
+            bases.append(name)
+            options.append(None)
+    out = []
+    for base, opts in zip(bases, options, strict=True):
+        group = [o or {} for b, o in zip(bases, options, strict=True) if b == base]
+        if opts is None or len(group) < 2:
+            out.append(base)
+            continue
+        keys = sorted({k for o in group for k in o})
+        differ = {k: opts.get(k) for k in keys
+                  if len({json.dumps(o.get(k), sort_keys=True) for o in group}) > 1}
+        head, plus, tail = base.partition("+aware")
+        out.append(detector_label(head, differ) + plus + tail)
+    return out
+
+
 def _labels(folders: list[dict]) -> list[str]:
-    return short_labels([f["name"] for f in folders], [f["folder"] for f in folders])
+    return short_labels(_compact_names(folders), [f["folder"] for f in folders])
 
 
 def _pair(a: dict, b: dict, names, alpha: float) -> dict:

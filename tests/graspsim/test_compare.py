@@ -443,3 +443,25 @@ def test_compare_table_width_stays_short_with_model_paths(tmp_path):
     text = comparison_text(compare_pair(a, b))
     assert str(deep) not in text
     assert max(len(line) for line in text.splitlines()[:4]) < 60
+
+
+def test_plugin_labels_keep_only_the_options_that_differ(tmp_path):
+    def plugin(folder, options, success, aware=""):
+        from graspsim.detectors import detector_label
+
+        path = _trials(tmp_path / folder, detector_label("net:Det", options) + aware, success)
+        cfg = json.loads((path / "config.json").read_text())
+        cfg["detector_options"] = options
+        (path / "config.json").write_text(json.dumps(cfg))
+        return path
+
+    a = plugin("a", {"model": "/x/runs/a/model.pt", "top_k": 5}, [1, 0, 1, 1])
+    b = plugin("b", {"model": "/x/runs/b/other.pt", "top_k": 5}, [1, 1, 0, 1])
+    c = _trials(tmp_path / "c", "mask-pca", [0, 1, 0, 1])
+    assert [(x["a"]["name"], x["b"]["name"]) for x in compare_folders([a, b, c])] == [
+        ("net:Det(model=model.pt)", "net:Det(model=other.pt)"),
+        ("net:Det(model=model.pt)", "mask-pca"), ("net:Det(model=other.pt)", "mask-pca")]
+    # compared once, a plug-in is its spec; +aware stays
+    assert compare_pair(a, c)["a"]["name"] == "net:Det"
+    d = plugin("d", {"model": "m.pt"}, [1, 1, 1, 1], aware="+aware")
+    assert compare_pair(d, c)["a"]["name"] == "net:Det+aware"
