@@ -490,3 +490,25 @@ def test_run_config_takes_a_detector_options_table(plugin_dir):
                 if k != "detector_options"}
     assert pipeline._recorded_config(recorded) == json.loads(json.dumps(
         pipeline.asdict(pipeline.RunConfig())))
+
+
+@pytest.mark.sim
+def test_run_trial_stage_passes_and_records_the_options(plugin_dir):
+    from graspsim import pipeline
+    from graspsim.executor import Executor
+
+    folder, write = plugin_dir
+    name = write("mydet_stage")
+    spec = f"{name}:WithOptions"
+    config = pipeline.load_config(trials=1, trial_candidates=0, baselines=[spec],
+                                  detector_options={spec: {"model": "runs/net/m.pt"}})
+    root = folder / "run"
+    root.mkdir()
+    stages = pipeline._Stages(root)
+    stages.finish("trials/dlsr", {"n": 0})
+    stages.finish("trials/dlsr-paper", {"n": 0})
+    pipeline.trial_stage(root, config, stages, root / "model" / "dlsr", seed=3,
+                         executor=Executor("sequential", progress=False), progress=False)
+    cfg = json.loads((root / "trials" / spec / "config.json").read_text())
+    assert cfg["detector_options"] == {"model": "runs/net/m.pt"}
+    assert cfg["detector"] == stages.get(f"trials/{spec}")["detector"] == f"{spec}(model=m.pt)"
