@@ -45,16 +45,19 @@ def register(subparsers) -> None:
                         "(not in the paper)")
     add_object_args(p, default="test")
     p.add_argument("--n", type=int, default=200,
-                   help="number of trials (with --declutter: of rounds)")
-    p.add_argument("--seed", type=int, default=0)
+                   help="number of trials (with --declutter: of rounds) (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="trial i is scene i of this seed for every detector (default: %(default)s)")
     p.add_argument("--out", required=True, help="output folder (resumes if it has trials)")
     add_executor_args(p)
     p.add_argument("--candidates", type=int, default=32,
                    help="rectangles executed to label each scene (0: no labels, no metric); "
-                        "with --declutter every observation of a round is labelled")
+                        "with --declutter every observation of a round is labelled "
+                        "(default: %(default)s)")
     p.add_argument("--sampler", default="mixed", choices=["mixed", "dense"],
                    help="labelling candidates: mixed (centroid, chord, random) or dense "
-                        "(Jacquard-like lattice, every 15 deg; --candidates is its budget)")
+                        "(Jacquard-like lattice, every 15 deg; --candidates is its budget)"
+                        " (default: %(default)s)")
     p.add_argument("--profile", default="default", choices=sorted(PROFILES),
                    help="how scenes are seen: camera, table, lighting, depth noise "
                         "(docs/sim_settings.md; default: %(default)s)")
