@@ -60,6 +60,8 @@ __all__ = [
     "read_gray",
     "read_depth_image",
     "clean_depth",
+    "inpaint_depth",
+    "iter_cornell",
     "resize_sample",
     "sample_negatives",
     "groups",
@@ -178,6 +180,58 @@ def clean_depth(raw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     valid = np.isfinite(raw) & (raw > 0)
     depth = np.where(valid, raw, 0).astype(np.float32)
     return depth, valid
+
+
+def inpaint_depth(depth, valid=None) -> np.ndarray:
+    """Missing depth filled as the Cornell preprocessing of the CNN peers fills it.
+
+    The published GG-CNN and GR-ConvNet code (``DepthImage.inpaint``, called by their
+    ``generate_cornell_depth.py``) pads the depth image by one pixel (OpenCV's default border,
+    a reflection), divides it by its largest absolute value (OpenCV inpaints float32 images in
+    [-1, 1]), fills the pixels equal to 0 with OpenCV's Navier-Stokes inpainting
+    (``cv2.inpaint(..., 1, cv2.INPAINT_NS)``, radius 1) and scales back. This does the same
+    computation; the readings themselves are kept exactly (scaling them there and back changes
+    them by up to one float32 step).
+
+    Parameters
+    ----------
+    depth : ndarray of shape (H, W)
+        Metres, 0 (or non-finite) where missing.
+    valid : ndarray of shape (H, W), bool, or None
+        Readings; default ``depth > 0`` and finite.
+
+    Returns
+    -------
+    ndarray of shape (H, W), float32
+        Metres; every pixel filled (a copy when nothing is missing).
+
+    Raises
+    ------
+    ValueError
+        A depth image that is not 2-D, or has no valid pixel.
+    """
+    import cv2
+
+    depth = np.asarray(depth, dtype=np.float32)
+    if depth.ndim != 2:
+        raise ValueError(f"depth must be a 2-D image, got shape {depth.shape}")
+    ok = np.isfinite(depth) & (depth > 0)
+    if valid is not None:
+        valid = np.asarray(valid).astype(bool)
+        if valid.shape != depth.shape:
+            raise ValueError(f"depth_valid has shape {valid.shape}, depth {depth.shape}")
+        ok &= valid
+    if not ok.any():
+        raise ValueError("the depth image has no valid pixel (all masked)")
+    d = np.where(ok, depth, 0.0).astype(np.float32)
+    if ok.all():
+        return d
+    pad = cv2.copyMakeBorder(d, 1, 1, 1, 1, cv2.BORDER_DEFAULT)
+    missing = cv2.copyMakeBorder((~ok).astype(np.uint8), 1, 1, 1, 1, cv2.BORDER_DEFAULT)
+    scale = float(np.abs(pad).max())
+    filled = cv2.inpaint(pad / scale, missing, 1, cv2.INPAINT_NS)
+    d = (filled[1:-1, 1:-1] * scale).astype(np.float32)
+    return np.where(ok, depth, d).astype(np.float32)
 
 
 def _check_shape(path: Path, arr: np.ndarray, shape: tuple[int, int], what: str):
@@ -512,6 +566,26 @@ def load_cornell(
     ValueError
         Unreadable image, bad rectangle file, inconsistent mapping.
     """
+    samples = list(iter_cornell(root, mapping, scale, depth_source))
+    ids = [s.image_id for s in samples]
+    if len(set(ids)) != len(ids):
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        raise ValueError(f"{root}: image numbers appear in more than one folder: {dup}")
+    return samples
+
+
+def iter_cornell(root, mapping=None, scale: float = 1.0, depth_source: str = "auto"):
+    """The images of a Cornell folder one at a time, as :func:`load_cornell` reads them.
+
+    For folders too large to hold in memory at once (a writer that handles one image at a
+    time). Takes :func:`load_cornell`'s parameters; image numbers repeated in two folders are
+    not detected here.
+
+    Yields
+    ------
+    GraspSample
+        In image-number order.
+    """
     root = Path(root)
     if not root.is_dir():
         raise FileNotFoundError(f"Cornell dataset folder not found: {root}")
@@ -527,7 +601,6 @@ def load_cornell(
     elif isinstance(mapping, dict):
         mapping = {_norm_image_id(str(k)): str(v) for k, v in mapping.items()}
 
-    samples = []
     for rgb_path in _cornell_images(root):
         stem = rgb_path.name[:-len("r.png")]  # pcdXXXX
         image_id = _norm_image_id(_CORNELL_RGB.match(rgb_path.name).group(1))
@@ -570,12 +643,7 @@ def load_cornell(
             source=rgb_path,
             K=None if camera is None else camera.K,
         )
-        samples.append(resize_sample(sample, scale) if scale != 1.0 else sample)
-    ids = [s.image_id for s in samples]
-    if len(set(ids)) != len(ids):
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        raise ValueError(f"{root}: image numbers appear in more than one folder: {dup}")
-    return samples
+        yield resize_sample(sample, scale) if scale != 1.0 else sample
 
 
 def _format_corners(rects) -> str:

@@ -24,6 +24,7 @@ COMMANDS = [
     "trials",
     "train",
     "dataset",
+    "export",
     "patches",
     "score",
     "compare",

@@ -85,6 +85,7 @@ __all__ = [
     "compare_pair",
     "compare_folders",
     "comparison_text",
+    "short_labels",
     "first_grasp",
     "removed_sign_test",
 ]
@@ -474,9 +475,100 @@ def _scene_differences(a: dict, b: dict) -> list[str]:
     return out
 
 
+def _tail(text: str, k: int) -> str:
+    """The last ``k`` parts of a path-like name (the whole name when it has fewer)."""
+    parts = [p for p in str(text).replace("\\", "/").split("/") if p]
+    return "/".join(parts[-k:]) if parts else str(text)
+
+
+def _unique(labels: list[str], longer) -> list[str]:
+    """``labels`` where every label that two folders share is replaced by ``longer(i, k)``
+    with ``k`` = 2, 3, ... until the shared ones differ (or ``longer`` stops changing)."""
+    labels = list(labels)
+    for k in range(2, 64):
+        dup = [i for i, lab in enumerate(labels) if labels.count(lab) > 1]
+        if not dup:
+            break
+        new = {i: longer(i, k) for i in dup}
+        if all(new[i] == labels[i] for i in dup):
+            break
+        labels = [new.get(i, lab) for i, lab in enumerate(labels)]
+    return labels
+
+
+def short_labels(names, folders) -> list[str]:
+    """Short, distinct labels of compared folders, for tables and verdicts.
+
+    Each detector name is shortened to its last path part (a model at ``runs/net/model/ggcnn``
+    is ``ggcnn``; ``ggcnn-model+aware`` stays), more of the path is added where two labels
+    would be the same, and folders of the same detector name are told apart by the shortest
+    part of their folder paths that differs (``runs/a/trials/mask-pca`` and
+    ``runs/b/trials/mask-pca``: ``mask-pca [a]`` and ``mask-pca [b]``).
+
+    Parameters
+    ----------
+    names : sequence of str
+        The detectors recorded in the folders.
+    folders : sequence of str or Path
+        The folders, in the same order.
+
+    Returns
+    -------
+    list of str
+    """
+    names = [str(n) for n in names]
+    parts = [Path(f).resolve().parts for f in folders]
+    labels = _unique([_tail(n, 1) for n in names], lambda i, k: _tail(names[i], k))
+    for lab in {lab for lab in labels if labels.count(lab) > 1}:
+        group = [i for i, x in enumerate(labels) if x == lab]
+        common = 0  # folder path parts the group's folders end with alike (trials/mask-pca)
+        while all(len(parts[i]) > common + 1 for i in group) and len(
+                {parts[i][-common - 1] for i in group}) == 1:
+            common += 1
+        cut = [parts[i][: len(parts[i]) - common] for i in group]
+        for k in range(1, max(len(c) for c in cut) + 1):
+            tails = ["/".join(c[-k:]) for c in cut]
+            if len(set(tails)) == len(tails) or k == max(len(c) for c in cut):
+                break
+        if len(set(tails)) < len(tails):  # the same folder twice: its whole path
+            tails = [Path(*parts[i]).as_posix() for i in group]
+        for i, tail in zip(group, tails, strict=True):
+            labels[i] = f"{lab} [{tail}]"
+    return labels
+
+
+def _compact_names(folders: list[dict]) -> list[str]:
+    """Detector names with their options (``mod:Det(model=a.pt,top_k=5)``) cut to the options
+    that differ among the compared folders of the same detector: none when it is compared
+    once."""
+    from .detectors import detector_label
+
+    bases, options = [], []
+    for f in folders:
+        name, opts = str(f["name"]), (f.get("config") or {}).get("detector_options")
+        if isinstance(opts, dict) and opts and "(" in name:
+            suffix = name[name.rindex(")") + 1:]  # "+aware"
+            bases.append(name[: name.index("(")] + suffix)
+            options.append(opts)
+        else:
+            bases.append(name)
+            options.append(None)
+    out = []
+    for base, opts in zip(bases, options, strict=True):
+        group = [o or {} for b, o in zip(bases, options, strict=True) if b == base]
+        if opts is None or len(group) < 2:
+            out.append(base)
+            continue
+        keys = sorted({k for o in group for k in o})
+        differ = {k: opts.get(k) for k in keys
+                  if len({json.dumps(o.get(k), sort_keys=True) for o in group}) > 1}
+        head, plus, tail = base.partition("+aware")
+        out.append(detector_label(head, differ) + plus + tail)
+    return out
+
+
 def _labels(folders: list[dict]) -> list[str]:
-    names = [f["name"] for f in folders]
-    return [str(f["folder"]) if names.count(f["name"]) > 1 else f["name"] for f in folders]
+    return short_labels(_compact_names(folders), [f["folder"] for f in folders])
 
 
 def _pair(a: dict, b: dict, names, alpha: float) -> dict:

@@ -216,7 +216,7 @@ def _round_task(specs, detector, seed, index, config, params):
 def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, out=None,
                n_jobs: int = 1, config: TrialConfig = DEFAULT_CONFIG,
                params: ExecutionParams | None = None, progress: bool = False, executor=None,
-               detector_name: str | None = None) -> dict:
+               detector_name: str | None = None, detector_options=None) -> dict:
     """Run (or finish) ``n`` clutter-removal rounds of ``config.n_objects`` objects each.
 
     Parameters are those of :func:`graspsim.trials.run_trials` (``n`` counts rounds); rounds
@@ -228,7 +228,7 @@ def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, 
         The summary (see :func:`summarize_rounds`), with ``records`` sorted by index.
     """
     det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config,
-                                       params)
+                                       params, detector_options)
     if config.n_objects < 1:
         raise ValueError(f"objects per scene must be >= 1, got {config.n_objects}")
     meta["mode"] = "declutter"

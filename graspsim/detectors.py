@@ -11,15 +11,19 @@ what it returns. Built-in detectors:
 * ``oracle``: the best physics-labelled positive (needs ``obs["positives"]``).
 
 Plug-ins (:func:`load_detector`): ``"package.module:NAME"`` imports ``NAME`` (a class or a
-factory called with no argument, or an object with ``predict``) from a module on ``sys.path``
-or in the current folder; installed packages can register names in the entry-point group
-``graspsim.detectors`` (see :data:`ENTRY_POINT_GROUP`).
+factory, called with the detector options as keyword arguments -- none by default --, or an
+object with ``predict``) from a module on ``sys.path`` or in the current folder; installed
+packages can register names in the entry-point group ``graspsim.detectors`` (see
+:data:`ENTRY_POINT_GROUP`). Options come from ``--detector-option KEY=VALUE``
+(:func:`parse_detector_options`) or a run configuration's ``detector_options`` table; a
+detector's recorded name says them (:func:`detector_label`).
 """
 
 from __future__ import annotations
 
 import copy
 import importlib
+import json
 import os
 import re
 import sys
@@ -48,6 +52,9 @@ __all__ = [
     "DETECTORS",
     "load_detector",
     "check_detector",
+    "check_detector_options",
+    "detector_label",
+    "parse_detector_options",
     "plugin_names",
     "object_mask_from_depth",
 ]
@@ -552,12 +559,21 @@ class PluginDetector:
     detector : object with ``predict(obs)``
     path : str or None
         Folder to put on ``sys.path`` before importing in another process.
+    options : dict or None
+        The keyword arguments NAME was called with (JSON values), passed again in another
+        process.
     """
 
-    def __init__(self, spec, detector, path=None):
+    def __init__(self, spec, detector, path=None, options=None):
         self.spec = spec
         self.detector = detector
         self.path = path
+        self.options = options
+
+    @property
+    def label(self) -> str:
+        """The name runs record: the spec with its options (:func:`detector_label`)."""
+        return detector_label(self.spec, self.options)
 
     @property
     def requires_labels(self) -> bool:
@@ -567,26 +583,128 @@ class PluginDetector:
         return self.detector.predict(obs)
 
     def __repr__(self):
-        return f"PluginDetector({self.spec!r})"
+        return f"PluginDetector({self.label!r})"
 
     def __reduce__(self):
-        return (_plugin_in_worker, (self.spec, self.path))
+        return (_plugin_in_worker, (self.spec, self.path, self.options))
 
 
 _WORKER_PLUGINS: dict = {}
 
 
-def _plugin_in_worker(spec, path):
+def _plugin_in_worker(spec, path, options=None):
     """Unpickling a :class:`PluginDetector`: import it (once per process) from ``path`` too."""
-    key = (spec, path, os.getpid())
+    key = (spec, path, json.dumps(options, sort_keys=True), os.getpid())
     det = _WORKER_PLUGINS.get(key)
     if det is None:
         if path is not None and path not in sys.path:
             sys.path.append(path)
             importlib.invalidate_caches()
-        det = load_detector(spec)
+        det = load_detector(spec, options)
         _WORKER_PLUGINS[key] = det
     return det
+
+
+def parse_detector_options(items) -> dict:
+    """``["KEY=VALUE", ...]`` (``--detector-option``, repeatable) as a dict of options.
+
+    A value is read as JSON where it parses (``5`` an int, ``0.5`` a float, ``true``, ``null``,
+    ``[1, 2]``, ``{"a": 1}``, ``"quoted"`` a string), else kept as the text given
+    (``model=runs/net/model.pt``).
+
+    Parameters
+    ----------
+    items : sequence of str
+
+    Returns
+    -------
+    dict
+        Keys in the order given.
+
+    Raises
+    ------
+    ValueError
+        An item without ``=``, a key that is not an identifier, or a key given twice.
+    """
+    out = {}
+    for item in items or ():
+        key, eq, text = str(item).partition("=")
+        key = key.strip()
+        if not eq or not key.isidentifier():
+            raise ValueError(f"--detector-option {item!r}: expected KEY=VALUE with KEY a "
+                             "Python identifier (the keyword the detector takes)")
+        if key in out:
+            raise ValueError(f"--detector-option {key!r} is given twice")
+        try:
+            out[key] = json.loads(text)
+        except ValueError:
+            out[key] = text
+    return out
+
+
+def check_detector_options(options, where: str = "detector options") -> dict:
+    """``options`` as a plain dict of JSON values with identifier keys (a copy), or an error.
+
+    Parameters
+    ----------
+    options : dict or None
+    where : str
+        What the options are, for the message.
+
+    Returns
+    -------
+    dict
+        Empty for None.
+    """
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise ValueError(f"{where} must be a table of KEY = VALUE, got {options!r}")
+    for key in options:
+        if not isinstance(key, str) or not key.isidentifier():
+            raise ValueError(f"{where}: option name {key!r} is not a Python identifier")
+    try:
+        return json.loads(json.dumps(dict(options), allow_nan=False))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: values must be JSON (numbers, strings, booleans, lists, "
+                         f"tables): {exc}") from None
+
+
+#: Longest option value a :func:`detector_label` shows in full.
+LABEL_VALUE_WIDTH = 24
+
+
+def _label_value(value) -> str:
+    if isinstance(value, str):
+        text = value.rstrip("/\\")
+        if "/" in text or os.sep in text:  # a path: its last part says which file or folder
+            text = text.replace(os.sep, "/").rsplit("/", 1)[-1] or text
+    else:
+        text = json.dumps(value, separators=(",", ":"))
+    return text if len(text) <= LABEL_VALUE_WIDTH else text[: LABEL_VALUE_WIDTH - 3] + "..."
+
+
+def detector_label(name, options=None) -> str:
+    """A detector's name with its options, as runs record and print it.
+
+    ``name`` alone without options; else ``name(key=value,...)`` with the keys sorted, a path
+    shortened to its last part (``model=runs/net/ggcnn.pt`` gives ``model=ggcnn.pt``) and a
+    value longer than :data:`LABEL_VALUE_WIDTH` characters cut. The full options are recorded
+    beside it (``detector_options`` in ``config.json``).
+
+    Parameters
+    ----------
+    name : str
+    options : dict or None
+
+    Returns
+    -------
+    str
+    """
+    if not options:
+        return str(name)
+    return f"{name}(" + ",".join(f"{k}={_label_value(options[k])}"
+                                 for k in sorted(options)) + ")"
 
 
 def one_line(exc: BaseException) -> str:
@@ -615,9 +733,9 @@ def _import_module(spec: str, module_name: str):
         try:
             return importlib.import_module(module_name)
         except ModuleNotFoundError as exc:
-            if not missing(exc):
-                raise ValueError(f"detector {spec!r}: importing {module_name!r} failed: "
-                                 f"{one_line(exc)}") from exc
+            if not missing(exc):  # a package the plug-in imports is missing
+                raise ValueError(f"plug-in {spec!r}: importing {module_name} failed: "
+                                 f"{_missing_text(exc)}") from exc
             cwd = os.getcwd()
             if attempt or cwd in sys.path:
                 raise ValueError(
@@ -627,19 +745,42 @@ def _import_module(spec: str, module_name: str):
             sys.path.append(cwd)  # like `python -m`, but installed modules keep precedence
             importlib.invalidate_caches()
         except Exception as exc:
-            raise ValueError(f"detector {spec!r}: importing {module_name!r} failed: "
+            raise ValueError(f"plug-in {spec!r}: importing {module_name} failed: "
                              f"{one_line(exc)}") from exc
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def _instantiate(spec: str, obj, what: str):
-    """A class or factory is called with no argument; an object with ``predict`` is used."""
+def _missing_text(exc: ImportError) -> str:
+    """``No module named 'x'`` and what to do about it, on one line."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    if isinstance(exc, ModuleNotFoundError) and exc.name:
+        return f"{text} (install it in the environment graspsim runs in)"
+    return text
+
+
+def _instantiate(spec: str, obj, what: str, options=None):
+    """A class or factory is called with ``options`` as keyword arguments; an object with
+    ``predict`` is used as it is (and takes no options)."""
+    options = options or {}
+    call = f"{what}({', '.join(f'{k}={v!r}' for k, v in options.items())})"
     if isinstance(obj, type) or (callable(obj) and not hasattr(obj, "predict")):
         try:
-            obj = obj()
+            obj = obj(**options)
+        except ImportError as exc:  # the constructor imports a missing package
+            raise ValueError(f"plug-in {spec!r}: {call} failed importing "
+                             f"{exc.name or 'a module'}: {_missing_text(exc)}") from exc
+        except TypeError as exc:
+            hint = ("" if options else "; give its arguments with --detector-option KEY=VALUE "
+                    "(a run configuration: its detector_options table)")
+            raise ValueError(f"plug-in {spec!r}: calling {call} failed: {one_line(exc)}"
+                             f"{hint}") from exc
         except Exception as exc:
-            raise ValueError(f"detector {spec!r}: calling {what}() failed (NAME must be a class "
-                             f"or a factory taking no argument): {one_line(exc)}") from exc
+            raise ValueError(f"plug-in {spec!r}: calling {call} failed: "
+                             f"{one_line(exc)}") from exc
+    elif options:
+        raise ValueError(f"plug-in {spec!r}: {what} is a {type(obj).__name__} object, not a "
+                         f"class or factory, and takes no options (given: "
+                         f"{', '.join(options)})")
     if not callable(getattr(obj, "predict", None)):
         raise ValueError(f"detector {spec!r}: {what} gave a {type(obj).__name__} with no "
                          "predict(obs) method")
@@ -660,10 +801,10 @@ def _resolve_spec(spec: str):
     return obj, module
 
 
-def _load_spec(spec: str) -> PluginDetector:
+def _load_spec(spec: str, options=None) -> PluginDetector:
     obj, module = _resolve_spec(spec)
-    return PluginDetector(spec, _instantiate(spec, obj, spec.partition(":")[2]),
-                          _module_folder(module))
+    return PluginDetector(spec, _instantiate(spec, obj, spec.partition(":")[2], options),
+                          _module_folder(module), options or None)
 
 
 def plugin_names() -> dict:
@@ -671,26 +812,30 @@ def plugin_names() -> dict:
     return {ep.name: ep.value for ep in entry_points(group=ENTRY_POINT_GROUP)}
 
 
-def _load_entry_point(name: str) -> PluginDetector | None:
+def _load_entry_point(name: str, options=None) -> PluginDetector | None:
     eps = [ep for ep in entry_points(group=ENTRY_POINT_GROUP) if ep.name == name]
     if not eps:
         return None
     ep = eps[0]
     try:
         obj = ep.load()
+    except ImportError as exc:
+        raise ValueError(f"plug-in {name!r}: importing {ep.value.partition(':')[0].strip()} "
+                         f"(entry point {ep.value!r} of {ENTRY_POINT_GROUP}) failed: "
+                         f"{_missing_text(exc)}") from exc
     except Exception as exc:
         raise ValueError(f"detector {name!r}: loading the entry point {ep.value!r} "
                          f"({ENTRY_POINT_GROUP}) failed: {one_line(exc)}") from exc
     module = sys.modules.get(ep.value.partition(":")[0].strip())
-    return PluginDetector(name, _instantiate(name, obj, ep.value),
-                          None if module is None else _module_folder(module))
+    return PluginDetector(name, _instantiate(name, obj, ep.value, options),
+                          None if module is None else _module_folder(module), options or None)
 
 
 #: Appended to a detector's name: the same detector made gripper-aware (:func:`load_detector`).
 AWARE_SUFFIX = "+aware"
 
 
-def load_detector(name_or_path):
+def load_detector(name_or_path, options=None):
     """A detector from a built-in name, a plug-in, or a saved DLSR model.
 
     Parameters
@@ -706,6 +851,10 @@ def load_detector(name_or_path):
         :meth:`dlsr.detection.DLSRDetector.save` (``.npz`` + ``.json``, with or without the
         suffix), which detects with the options saved in the model; the path of a GG-CNN
         model (``MODEL.pt`` + ``MODEL.json``, :mod:`graspsim.ggcnn`).
+    options : dict or None
+        Keyword arguments for a plug-in's class or factory, or a built-in detector's class
+        (:func:`parse_detector_options` reads them from ``KEY=VALUE`` text). A saved model
+        detects with the options saved in it and takes none.
 
     Returns
     -------
@@ -716,20 +865,29 @@ def load_detector(name_or_path):
     Raises
     ------
     ValueError
-        A plug-in that cannot be imported, lacks the attribute, or has no ``predict``.
+        A plug-in that cannot be imported (the message names the missing module), lacks the
+        attribute, has no ``predict`` or does not take the options.
     FileNotFoundError
         If it is none of the above.
     """
     key = str(name_or_path)
+    options = check_detector_options(options, f"detector {key!r}: options")
     if key in DETECTORS:
-        return DETECTORS[key]()
+        try:
+            return DETECTORS[key](**options)
+        except TypeError as exc:
+            raise ValueError(f"detector {key!r}: {one_line(exc)}") from exc
     if key.endswith(AWARE_SUFFIX) and key != AWARE_SUFFIX:
-        return gripper_aware(load_detector(key[: -len(AWARE_SUFFIX)]))
+        return gripper_aware(load_detector(key[: -len(AWARE_SUFFIX)], options))
     if _SPEC.match(key):
-        return _load_spec(key)
-    det = _load_entry_point(key)
+        return _load_spec(key, options)
+    det = _load_entry_point(key, options)
     if det is not None:
         return det
+    if options:
+        raise ValueError(f"detector {key!r}: options ({', '.join(options)}) are for plug-ins "
+                         "and the built-in detectors; a saved model detects with the options "
+                         "saved in it")
     from .ggcnn.model import is_ggcnn_model
 
     if is_ggcnn_model(key):
@@ -751,18 +909,43 @@ def load_detector(name_or_path):
     )
 
 
-def check_detector(name_or_path) -> None:
+def _check_signature(spec: str, obj, options: dict) -> None:
+    """The options bind to the class's or factory's parameters (checked without calling it)."""
+    import inspect
+
+    if not (isinstance(obj, type) or (callable(obj) and not hasattr(obj, "predict"))):
+        if options:
+            raise ValueError(f"plug-in {spec!r}: a {type(obj).__name__} object, not a class or "
+                             f"factory, takes no options (given: {', '.join(options)})")
+        return
+    try:
+        signature = inspect.signature(obj)
+    except (TypeError, ValueError):  # a builtin without a signature: called as it is
+        return
+    try:
+        signature.bind(**options)
+    except TypeError as exc:
+        hint = ("" if options else "; give its arguments with --detector-option KEY=VALUE (a "
+                "run configuration: its detector_options table)")
+        raise ValueError(f"plug-in {spec!r}: {spec.partition(':')[2]}{signature} does not take "
+                         f"the options given ({', '.join(options) or 'none'}): {exc}"
+                         f"{hint}") from None
+
+
+def check_detector(name_or_path, options=None) -> None:
     """Raise the error :func:`load_detector` would give for ``name_or_path``, without loading it.
 
     A plug-in's module is imported and NAME looked up (a class must have ``predict``), but no
     factory or class is called and no model is read, so checking costs no checkpoint load; use
-    it to reject a bad name before a long run starts.
+    it to reject a bad name before a long run starts. ``options`` are checked to be JSON
+    values with identifier names, and refused for a saved model.
     """
     key = str(name_or_path)
+    options = check_detector_options(options, f"detector {key!r}: options")
     if key in DETECTORS:
         return
     if key.endswith(AWARE_SUFFIX) and key != AWARE_SUFFIX:
-        check_detector(key[: -len(AWARE_SUFFIX)])
+        check_detector(key[: -len(AWARE_SUFFIX)], options)
         return
     if _SPEC.match(key):
         obj, _ = _resolve_spec(key)
@@ -772,9 +955,14 @@ def check_detector(name_or_path) -> None:
         if not callable(obj) and not callable(getattr(obj, "predict", None)):
             raise ValueError(f"detector {key!r}: {type(obj).__name__} object is neither a "
                              "class, a factory nor a detector with predict(obs)")
+        _check_signature(key, obj, options)
         return
     if key in plugin_names():
         return
+    if options:
+        raise ValueError(f"detector {key!r}: options ({', '.join(options)}) are for plug-ins "
+                         "and the built-in detectors; a saved model detects with the options "
+                         "saved in it")
     from .ggcnn.model import is_ggcnn_model, require_torch
 
     if is_ggcnn_model(key):

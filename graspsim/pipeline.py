@@ -140,6 +140,20 @@ class RunConfig:
         Detectors run beside DLSR in the trials: built-in names, plug-ins
         (``"package.module:NAME"``, entry-point names of ``graspsim.detectors``) or saved
         models (see :func:`graspsim.detectors.load_detector`).
+    detector_options : dict
+        Options of baselines, by name: keyword arguments of a plug-in's class or factory (or
+        a built-in detector's class), JSON values. In a TOML file, one table per baseline::
+
+            [run]
+            baselines = ["mask-pca", "mynet:Detector"]
+
+            [run.detector_options."mynet:Detector"]
+            model = "runs/mynet/model.pt"
+            top_k = 5
+
+        Recorded in each trial folder's ``config.json`` and in the detector's name there
+        (:func:`graspsim.detectors.detector_label`); the trial folder keeps the baseline's
+        name.
     backend, address, jobs :
         Executor for the parallel stages (see :class:`graspsim.executor.Executor`).
     """
@@ -179,6 +193,7 @@ class RunConfig:
     trials: int = 100
     trial_candidates: int = 32
     baselines: list[str] = field(default_factory=lambda: ["mask-pca", "random", "oracle"])
+    detector_options: dict = field(default_factory=dict)
     backend: str = "loky"
     address: str | None = None
     jobs: int = 2
@@ -258,6 +273,13 @@ class RunConfig:
                                                       for b in self.baselines):
             raise ValueError(f"baselines must be a list of detector names, "
                              f"got {self.baselines!r}")
+        if not isinstance(self.detector_options, dict):
+            raise ValueError(f"detector_options must be a table of tables (one per baseline), "
+                             f"got {self.detector_options!r}")
+        unknown = sorted(set(self.detector_options) - set(self.baselines))
+        if unknown:
+            raise ValueError(f"detector_options: {unknown} not among the baselines "
+                             f"{self.baselines}")
         seen = set()
         for name in self.baselines:
             if name in ("dlsr", "dlsr-paper"):
@@ -267,7 +289,7 @@ class RunConfig:
                 raise ValueError(f"baselines: {name!r} is listed twice")
             seen.add(name)
             try:
-                check_detector(name)
+                check_detector(name, self.detector_options.get(name))
             except (ValueError, FileNotFoundError) as exc:
                 raise ValueError(f"baselines: {exc}") from None
 
@@ -584,6 +606,7 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
     any name :func:`graspsim.detectors.load_detector` takes, plug-ins
     (``package.module:NAME``, entry-point names) included.
     """
+    from .detectors import detector_label
     from .trials import TrialConfig, run_trials
 
     trial_cfg = TrialConfig(n_candidates=config.trial_candidates, sampler=config.label_sampler,
@@ -594,11 +617,13 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
             continue
         t0 = time.perf_counter()
         det = _trial_detector(name, model_path, config, hand=config.gripper)
+        options = config.detector_options.get(name) or None
         s = run_trials(det, objects=config.object_set("trial_objects"), n=config.trials,
                        seed=seed,
                        out=root / "trials" / name, config=trial_cfg, executor=executor,
-                       progress=progress, detector_name=name,
-                       params=config.execution_params(), labels=root / "labels")
+                       progress=progress, detector_name=detector_label(name, options),
+                       params=config.execution_params(), labels=root / "labels",
+                       detector_options=options)
         s.pop("records", None)
         s["seconds"] = time.perf_counter() - t0
         stages.finish(key, s)
@@ -634,7 +659,7 @@ def _trial_detector(name: str, model_path: Path, config: RunConfig, hand: str = 
         return model.detector(kind, **options)
     from .detectors import load_detector
 
-    return load_detector(name)
+    return load_detector(name, config.detector_options.get(name))
 
 
 def resume_job(folder, progress: bool = True, **execution) -> Path:

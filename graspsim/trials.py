@@ -25,8 +25,10 @@ Output folder (``out``):
   rectangle's ``score``.
 * ``config.json``: the run's arguments, the execution parameters among them (``execution``,
   :class:`graspsim.execution.ExecutionParams` as a dict; read it back with
-  :func:`campaign_execution_params`). A resume with other arguments is refused; a folder written
-  before the execution parameters were recorded ran with the defaults.
+  :func:`campaign_execution_params`) and, for a detector given options, ``detector_options``
+  (its ``detector`` then names them: :func:`graspsim.detectors.detector_label`). A resume with
+  other arguments is refused; a folder written before the execution parameters were recorded
+  ran with the defaults.
 * ``summary.json`` and ``summary.md``: physical success rate with a Wilson 95 % interval,
   rectangle-metric accuracy on the same trials, the 2x2 table of metric verdict against physical
   outcome, failure reasons, planning time (median and 95th percentile), trials per second.
@@ -52,7 +54,13 @@ from dlsr.records import (
     write_text_atomic,
 )
 
-from .detectors import check_detections, load_detector, one_line
+from .detectors import (
+    check_detections,
+    check_detector_options,
+    detector_label,
+    load_detector,
+    one_line,
+)
 from .execution import (
     ExecutionParams,
     execute_grasp,
@@ -315,7 +323,8 @@ def observation(frame, detector_seed: int) -> dict:
 
 
 def _detector_name(detector) -> str:
-    return str(getattr(detector, "spec", None) or type(detector).__name__)
+    return str(getattr(detector, "label", None) or getattr(detector, "spec", None)
+               or type(detector).__name__)
 
 
 def _label_scene(sim, scene, frame, bodies, rng, detector, config, params, known=None):
@@ -560,16 +569,21 @@ def _run_missing(fn, tasks, done: dict, jsonl, executor, desc: str, on_record=No
     return new
 
 
-def _campaign_setup(detector, detector_name, objects, n: int, seed: int, config, params):
+def _campaign_setup(detector, detector_name, objects, n: int, seed: int, config, params,
+                    options=None):
     """The detector, the object specs and the arguments a campaign folder records
-    (``config.json``, with the execution parameters) for :func:`run_trials` and
-    :func:`graspsim.declutter.run_rounds`."""
+    (``config.json``, with the execution parameters and the detector's options, when it has
+    any) for :func:`run_trials` and :func:`graspsim.declutter.run_rounds`."""
     check_scene(config.scene, config.n_objects)
-    det, det_name = _resolve(detector, detector_name)
+    options = check_detector_options(options)
+    det, det_name = _resolve(detector, detector_name, options)
     specs = resolve_objects(objects, params)
     if n < 0:
         raise ValueError(f"n must be >= 0, got {n}")
-    meta = {"detector": det_name, **object_set_meta(objects, specs), "seed": seed,
+    meta = {"detector": det_name,
+            # recorded only when given, so folders written without options still resume
+            **({"detector_options": options} if options else {}),
+            **object_set_meta(objects, specs), "seed": seed,
             "config": asdict(config),
             "execution": asdict(ExecutionParams() if params is None else params)}
     return det, specs, meta
@@ -597,10 +611,10 @@ def campaign_execution_params(folder) -> ExecutionParams:
     return execution_params_from_dict(cfg.get("execution", {}), str(path))
 
 
-def _resolve(detector, detector_name):
-    name = detector_name or (str(detector) if isinstance(detector, str | Path)
-                             else _detector_name(detector))
-    det = load_detector(detector) if isinstance(detector, str | Path) else detector
+def _resolve(detector, detector_name, options=None):
+    name = detector_name or (detector_label(str(detector), options)
+                             if isinstance(detector, str | Path) else _detector_name(detector))
+    det = load_detector(detector, options) if isinstance(detector, str | Path) else detector
     return det, name
 
 
@@ -614,7 +628,8 @@ def _executor(executor, n_jobs, progress):
 def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, out=None,
                n_jobs: int = 1, config: TrialConfig = TrialConfig(),
                params: ExecutionParams | None = None, progress: bool = False,
-               executor=None, detector_name: str | None = None, labels=None) -> dict:
+               executor=None, detector_name: str | None = None, labels=None,
+               detector_options=None) -> dict:
     """Run (or finish) ``n`` trials and write records and summaries to ``out``.
 
     Parameters
@@ -639,12 +654,19 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
     executor : graspsim.executor.Executor or None
         Where trials run (local cores or a Ray cluster; ``n_jobs`` is then ignored).
     detector_name : str or None
-        Name recorded for a detector object (default: its plug-in name or class name).
+        Name recorded for a detector object (default: its plug-in name with its options, or
+        its class name).
     labels : str or Path or None
         A folder of the scenes' physics labels shared with other detectors' trials on the
         same scenes (:class:`graspsim.scene_labels.SceneLabels`, made when missing): scenes
         it holds are not labelled again, the others are added to it. The records are the
         same with or without it. A folder of other scenes is refused.
+    detector_options : dict or None
+        Keyword arguments of a plug-in's class or factory (or a built-in detector's class),
+        JSON values: ``detector`` (a name) is loaded with them; a detector object is taken
+        as built with them. Recorded in ``config.json`` (``detector_options``) and in the
+        detector's name (:func:`graspsim.detectors.detector_label`); a resume with other
+        options is refused.
 
     Returns
     -------
@@ -652,12 +674,13 @@ def run_trials(detector="random", objects="test", n: int = 200, seed: int = 0, o
         The summary (see :func:`summarize`), with ``records`` sorted by index.
     """
     det, specs, meta = _campaign_setup(detector, detector_name, objects, n, seed, config,
-                                       params)
+                                       params, detector_options)
     store, known, on_record = None, {}, None
     if labels is not None and config.n_candidates > 0:
         from .scene_labels import SceneLabels
 
-        store = SceneLabels.open(labels, {k: v for k, v in meta.items() if k != "detector"})
+        store = SceneLabels.open(labels, {k: v for k, v in meta.items()
+                                          if k not in ("detector", "detector_options")})
         known = store.read()
 
         def on_record(rec):

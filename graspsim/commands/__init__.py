@@ -14,9 +14,10 @@ def add_executor_args(p: argparse.ArgumentParser, jobs_default: int = 1) -> None
     """``--jobs``, ``--backend loky|ray`` and ``--address HOST:PORT`` on a long command."""
     p.add_argument("--jobs", type=int, default=jobs_default,
                    help="parallel workers (-1: all cores, or all cluster CPUs with Ray); "
-                        "results do not depend on it")
+                        "results do not depend on it (default: %(default)s)")
     p.add_argument("--backend", choices=["loky", "ray"], default="loky",
-                   help="where tasks run: local processes (loky) or a Ray cluster")
+                   help="where tasks run: local processes (loky) or a Ray cluster "
+                        "(default: %(default)s)")
     p.add_argument("--address", default=None, metavar="HOST:PORT",
                    help="Ray cluster to join (with --backend ray; default: a local instance)")
 
@@ -52,7 +53,8 @@ def add_object_args(p: argparse.ArgumentParser, default: str | None = "test",
                         "(URDF and OBJ files)"
                         + ("" if default is None else " (default: %(default)s)"))
     p.add_argument("--object-scale", type=float, default=1.0, metavar="FACTOR",
-                   help="scale every object (0.001 for meshes in millimetres)")
+                   help="scale every object (0.001 for meshes in millimetres; default: "
+                        "%(default)s)")
     p.add_argument("--object-mass", type=float, default=None, metavar="KG",
                    help="give every object this mass (default: each object's own; 0.1 kg for "
                         "a folder's OBJ files)")

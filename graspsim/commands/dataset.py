@@ -19,16 +19,26 @@ from . import (
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "dataset", help="render scenes, label rectangles by physics, write the Cornell layout"
+        "dataset", help="render scenes, label rectangles by physics, write the Cornell layout",
+        description="Render scenes, label candidate rectangles by executing them, and write the "
+                    "Cornell layout with a manifest (scenes.json) that `graspsim score` "
+                    "rebuilds the scenes from. Every scene is kept: an image where no "
+                    "candidate lifted the object has an empty pcdXXXXcpos.txt, and missing "
+                    "depth stays 0 in pcdXXXXd.tiff. For the GG-CNN / GR-ConvNet Cornell "
+                    "loaders, `graspsim export` writes a copy with only images that have a "
+                    "positive and inpainted depth (docs/guides/data-formats.md).",
     )
     p.add_argument("--scenes", type=int, required=True, help="number of images")
     add_object_args(p, default="train")
     p.add_argument("--out", required=True, help="dataset root folder")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--candidates", type=int, default=48, help="rectangles labelled per scene")
+    p.add_argument("--seed", type=int, default=0, help="scene i draws from SeedSequence(seed, "
+                   "spawn_key=(i,)) (default: %(default)s)")
+    p.add_argument("--candidates", type=int, default=48,
+                   help="rectangles labelled per scene (default: %(default)s)")
     p.add_argument("--sampler", default="mixed", choices=["mixed", "dense"],
                    help="labelling candidates: mixed (centroid, chord, random) or dense "
-                        "(Jacquard-like lattice, every 15 deg; --candidates is its budget)")
+                        "(Jacquard-like lattice, every 15 deg; --candidates is its budget) "
+                        "(default: %(default)s)")
     p.add_argument("--objects-per-scene", type=int, default=None,
                    help="default: 1, or 5 with --scene packed or pile")
     add_scene_arg(p)

@@ -23,7 +23,8 @@ def register(subparsers) -> None:
                    help="depth image: float TIFF in metres (or .npy), <= 0 means missing; or a "
                         "Cornell point cloud pcdXXXX.txt in any frame (its camera is fitted)")
     p.add_argument("--depth-units", type=float, default=1.0,
-                   help="multiplies the depth values to give metres (0.001 for millimetres)")
+                   help="multiplies the depth values to give metres (0.001 for millimetres)"
+                        " (default: %(default)s)")
     p.add_argument("--mask", default=None, help="object mask image (non-zero = object)")
     p.add_argument("--background", default=None,
                    help="background image: object region by background subtraction")
@@ -37,7 +38,8 @@ def register(subparsers) -> None:
                      help="camera file with the matrix K (graspsim datasets' "
                           "pcdXXXXcamera.json)")
     p.add_argument("--coarse-to-fine", action="store_true")
-    p.add_argument("--top-k", type=int, default=5)
+    p.add_argument("--top-k", type=int, default=5,
+                   help="rectangles detected, best first (default: %(default)s)")
     p.add_argument("--out", default=None, help="overlay PNG (best in red/blue, others in "
                    "yellow/grey)")
     p.set_defaults(func=_run)

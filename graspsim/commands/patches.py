@@ -18,10 +18,11 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "patches", help="random 6x6x8 patches of simulated rectangle images (self-taught data)"
     )
-    p.add_argument("--n", type=int, default=100_000, help="number of patches")
+    p.add_argument("--n", type=int, default=100_000,
+                   help="number of patches (default: %(default)s)")
     p.add_argument("--out", required=True, help=".npz file (dlsr.patches.load_patch_file)")
     add_object_args(p, default="all")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
     p.add_argument("--scenes", type=int, default=None, help="default: n / 2000")
     p.add_argument("--objects-per-scene", type=int, default=None,
                    help="default: 1, or 5 with --scene packed or pile")

@@ -24,7 +24,7 @@ def register(subparsers) -> None:
                    help="default: csv for a .csv file; for a folder, from its file names")
     p.add_argument("--top-k", type=int, default=1, metavar="K",
                    help="execute each image's first K rectangles (success at k = any of the "
-                        "first k); the top-1 outcome is always recorded")
+                        "first k); the top-1 outcome is always recorded (default: %(default)s)")
     add_object_args(p, default=None)
     add_executor_args(p)
     p.set_defaults(func=_run)

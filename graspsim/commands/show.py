@@ -15,9 +15,10 @@ def register(subparsers) -> None:
     )
     p.add_argument("data", metavar="DATA", help="dataset root folder")
     p.add_argument("--format", choices=["cornell", "jacquard"], required=True)
-    p.add_argument("--scale", type=float, default=1.0, help="resize images and rectangles")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="resize images and rectangles (default: %(default)s)")
     p.add_argument("--depth", choices=["stereo", "perfect"], default="stereo",
-                   help="Jacquard depth variant (ignored for Cornell)")
+                   help="Jacquard depth variant (ignored for Cornell) (default: %(default)s)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder for PNG overlays")
     p.set_defaults(func=_main)
 

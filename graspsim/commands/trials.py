@@ -29,6 +29,13 @@ def register(subparsers) -> None:
                         "factory whose object has predict(obs); the current folder is "
                         "searched too), a name registered in the entry-point group "
                         "graspsim.detectors, or the path of a saved model")
+    p.add_argument("--detector-option", action="append", default=[], metavar="KEY=VALUE",
+                   dest="detector_options",
+                   help="keyword argument of the plug-in's class or factory (or a built-in "
+                        "detector's class), repeatable: --detector-option model=runs/net.pt "
+                        "--detector-option top_k=5; VALUE is read as JSON where it parses "
+                        "(5, 0.5, true, [1, 2]), else as text; recorded in config.json and in "
+                        "the detector's name")
     p.add_argument("--gripper-aware", action="store_true",
                    help="keep only the detector's rectangles this gripper can execute, judged "
                         "from the depth image (opening within reach, fingers not landing on a "
@@ -38,16 +45,19 @@ def register(subparsers) -> None:
                         "(not in the paper)")
     add_object_args(p, default="test")
     p.add_argument("--n", type=int, default=200,
-                   help="number of trials (with --declutter: of rounds)")
-    p.add_argument("--seed", type=int, default=0)
+                   help="number of trials (with --declutter: of rounds) (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="trial i is scene i of this seed for every detector (default: %(default)s)")
     p.add_argument("--out", required=True, help="output folder (resumes if it has trials)")
     add_executor_args(p)
     p.add_argument("--candidates", type=int, default=32,
                    help="rectangles executed to label each scene (0: no labels, no metric); "
-                        "with --declutter every observation of a round is labelled")
+                        "with --declutter every observation of a round is labelled "
+                        "(default: %(default)s)")
     p.add_argument("--sampler", default="mixed", choices=["mixed", "dense"],
                    help="labelling candidates: mixed (centroid, chord, random) or dense "
-                        "(Jacquard-like lattice, every 15 deg; --candidates is its budget)")
+                        "(Jacquard-like lattice, every 15 deg; --candidates is its budget)"
+                        " (default: %(default)s)")
     p.add_argument("--profile", default="default", choices=sorted(PROFILES),
                    help="how scenes are seen: camera, table, lighting, depth noise "
                         "(docs/sim_settings.md; default: %(default)s)")
@@ -88,17 +98,22 @@ def _run(args: argparse.Namespace) -> int:
         params = ExecutionParams.with_hand(args.gripper, min_grip=args.min_grip)
     except ValueError as exc:
         raise ValueError(f"--min-grip: {exc}") from None
+    from graspsim.detectors import detector_label, parse_detector_options
+
+    options = parse_detector_options(args.detector_options)
     executor = executor_from_args(args)
     detector, name = args.detector, None
     if args.gripper_aware:
         from graspsim.detectors import gripper_aware, load_detector
 
-        detector = gripper_aware(load_detector(args.detector), min_grip=args.min_grip,
+        detector = gripper_aware(load_detector(args.detector, options), min_grip=args.min_grip,
                                  hand=args.gripper)
-        name = f"{args.detector}+aware"
+        name = f"{detector_label(args.detector, options)}+aware"
+    label = name or detector_label(args.detector, options)
     kwargs = dict(detector=detector, objects=object_set_from_args(args), n=args.n, seed=args.seed,
                   out=args.out, n_jobs=args.jobs, progress=True, config=config,
-                  params=params, executor=executor, detector_name=name)
+                  params=params, executor=executor, detector_name=name,
+                  detector_options=options or None)
     if args.declutter:
         from graspsim.declutter import run_rounds
 
@@ -107,14 +122,14 @@ def _run(args: argparse.Namespace) -> int:
                              "which depends on the detector's grasps; not with --declutter")
 
         s = run_rounds(**kwargs)
-        print(f"{args.detector}: grasp success {s['successes']}/{s['attempts']} = "
+        print(f"{label}: grasp success {s['successes']}/{s['attempts']} = "
               f"{_pct(s['success_rate'])}, declutter rate {s['removed']}/"
               f"{s['objects_placed']} = {_pct(s['declutter_rate'])} over {s['rounds']} rounds "
               f"of {k} objects; summary in {args.out}/summary.md")
         return 0
     s = run_trials(**kwargs, labels=args.labels)
     lo, hi = s["success_ci95"]
-    print(f"{args.detector}: success {s['successes']}/{s['n']} = {_pct(s['success_rate'])} "
+    print(f"{label}: success {s['successes']}/{s['n']} = {_pct(s['success_rate'])} "
           f"(95 % CI {_pct(lo)}-{_pct(hi)}); summary in {args.out}/summary.md")
     return 0
 

@@ -186,8 +186,9 @@ def prepare_depth(depth, valid=None) -> np.ndarray:
     """GG-CNN's depth input: missing depth inpainted, mean subtracted, clipped to [-1, 1].
 
     Missing pixels (``valid`` false, or depth <= 0) are filled by OpenCV's Navier-Stokes
-    inpainting after a 1-pixel border pad and scaling the depth into [-1, 1]; the filled depth
-    (metres) has its mean subtracted and is clipped to [-1, 1].
+    inpainting after a 1-pixel border pad and scaling the depth into [-1, 1]
+    (:func:`dlsr.datasets.inpaint_depth`); the filled depth (metres) has its mean subtracted
+    and is clipped to [-1, 1].
 
     Parameters
     ----------
@@ -205,27 +206,9 @@ def prepare_depth(depth, valid=None) -> np.ndarray:
     ValueError
         A depth image that is not 2-D, or has no valid pixel.
     """
-    import cv2
+    from dlsr.datasets import inpaint_depth
 
-    depth = np.asarray(depth, dtype=np.float32)
-    if depth.ndim != 2:
-        raise ValueError(f"depth must be a 2-D image, got shape {depth.shape}")
-    ok = np.isfinite(depth) & (depth > 0)
-    if valid is not None:
-        valid = np.asarray(valid).astype(bool)
-        if valid.shape != depth.shape:
-            raise ValueError(f"depth_valid has shape {valid.shape}, depth {depth.shape}")
-        ok &= valid
-    if not ok.any():
-        raise ValueError("the depth image has no valid pixel (all masked)")
-    d = np.where(ok, depth, 0.0).astype(np.float32)
-    if not ok.all():
-        pad = cv2.copyMakeBorder(d, 1, 1, 1, 1, cv2.BORDER_DEFAULT)
-        missing = cv2.copyMakeBorder((~ok).astype(np.uint8), 1, 1, 1, 1, cv2.BORDER_DEFAULT)
-        scale = float(np.abs(pad).max())
-        filled = cv2.inpaint(pad / scale, missing, 1, cv2.INPAINT_NS)
-        d = (filled[1:-1, 1:-1] * scale).astype(np.float32)
-        d = np.where(ok, depth, d)  # readings kept exactly; holes from the inpainting
+    d = inpaint_depth(depth, valid)
     d = d - d[np.isfinite(d)].mean()
     return np.clip(np.nan_to_num(d, nan=0.0), -1.0, 1.0).astype(np.float32)
 

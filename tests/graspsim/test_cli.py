@@ -73,3 +73,23 @@ def test_sigterm_stops_the_loky_workers(monkeypatch, capsys, sigterm_caught_here
     assert "terminated" in capsys.readouterr().err
     assert workers and os.getpid() not in workers
     assert not still_running(workers), "loky workers still running after SIGTERM"
+
+
+@pytest.mark.parametrize("command", ["dataset", "export", "trials", "patches", "score",
+                                     "show", "detect"])
+def test_help_shows_every_default(command):
+    """Every option with a default value says it in its help (``dataset --help`` did not)."""
+    import argparse
+
+    from graspsim.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    parser = sub.choices[command]
+    flags = (None, False, True, argparse.SUPPRESS)
+    missing = [a.option_strings[0] for a in parser._actions
+               if a.option_strings and not any(a.default is x for x in flags)
+               and a.default != [] and "default" not in (a.help or "")]
+    assert not missing, f"graspsim {command} --help shows no default for {missing}"
+    text = parser.format_help()
+    if command == "dataset":
+        assert "(default: 48)" in text and "(default: 0)" in text

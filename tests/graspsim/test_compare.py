@@ -13,6 +13,7 @@ from graspsim.compare import (
     compare_folders,
     compare_outcomes,
     compare_pair,
+    comparison_text,
     load_folder,
     mcnemar_exact,
     paired_counts,
@@ -254,10 +255,10 @@ def test_compare_folders_makes_every_pair(tmp_path):
     out = compare_folders(dirs)
     assert [(c["a"]["name"], c["b"]["name"]) for c in out] == [
         ("dlsr", "mask-pca"), ("dlsr", "random"), ("mask-pca", "random")]
-    # two folders of the same detector are told apart by their paths
+    # two folders of the same detector are told apart by the part of their paths that differs
     twin = _trials(tmp_path / "again" / "dlsr", "dlsr", [1, 0, 1, 1])
     c = compare_folders([dirs[0], twin])[0]
-    assert c["a"]["name"] == str(dirs[0]) and c["b"]["name"] == str(twin)
+    assert (c["a"]["name"], c["b"]["name"]) == (f"dlsr [{tmp_path.name}]", "dlsr [again]")
     with pytest.raises(ValueError, match="at least two"):
         compare_folders(dirs[:1])
     disjoint = _trials(tmp_path / "later", "oracle", [1, 1], indices=[10, 11])
@@ -417,3 +418,50 @@ def test_clutter_rounds_pair_on_first_grasps_with_a_sign_test_on_removals(tmp_pa
     (tmp_path / "bad" / "rounds.jsonl").write_text(json.dumps({"index": 0}) + "\n")
     with pytest.raises(ValueError, match="round record 1 has no 'attempts'"):
         compare_pair(a, tmp_path / "bad")
+
+
+def test_labels_are_short_and_distinct(tmp_path):
+    from graspsim.compare import short_labels
+
+    long_model = str(tmp_path / "campaigns" / "2026" / "grconv" / "model" / "ggcnn")
+    # a model's path becomes its last part; a plug-in label with options stays whole
+    assert short_labels([long_model, "mask-pca", "m:Det(model=a.pt)"], ["x", "y", "z"]) == [
+        "ggcnn", "mask-pca", "m:Det(model=a.pt)"]
+    # two models of the same file name in different folders: as much path as tells them apart
+    other = long_model.replace("grconv", "ggcnn")
+    assert short_labels([long_model, other, "mask-pca"], ["x", "y", "z"]) == [
+        "grconv/model/ggcnn", "ggcnn/model/ggcnn", "mask-pca"]
+    # the same name in two runs: the run folders tell them apart
+    a, b = tmp_path / "run-a" / "trials" / "m", tmp_path / "run-b" / "trials" / "m"
+    assert short_labels(["m", "m"], [a, b]) == ["m [run-a]", "m [run-b]"]
+
+
+def test_compare_table_width_stays_short_with_model_paths(tmp_path):
+    deep = tmp_path / "home" / "user" / "experiments" / "2026-12-05" / "grconvnet3" / "model"
+    a = _trials(tmp_path / "a", str(deep / "ggcnn"), [1, 0, 1, 1])
+    b = _trials(tmp_path / "b", "mask-pca", [1, 1, 0, 1])
+    text = comparison_text(compare_pair(a, b))
+    assert str(deep) not in text
+    assert max(len(line) for line in text.splitlines()[:4]) < 60
+
+
+def test_plugin_labels_keep_only_the_options_that_differ(tmp_path):
+    def plugin(folder, options, success, aware=""):
+        from graspsim.detectors import detector_label
+
+        path = _trials(tmp_path / folder, detector_label("net:Det", options) + aware, success)
+        cfg = json.loads((path / "config.json").read_text())
+        cfg["detector_options"] = options
+        (path / "config.json").write_text(json.dumps(cfg))
+        return path
+
+    a = plugin("a", {"model": "/x/runs/a/model.pt", "top_k": 5}, [1, 0, 1, 1])
+    b = plugin("b", {"model": "/x/runs/b/other.pt", "top_k": 5}, [1, 1, 0, 1])
+    c = _trials(tmp_path / "c", "mask-pca", [0, 1, 0, 1])
+    assert [(x["a"]["name"], x["b"]["name"]) for x in compare_folders([a, b, c])] == [
+        ("net:Det(model=model.pt)", "net:Det(model=other.pt)"),
+        ("net:Det(model=model.pt)", "mask-pca"), ("net:Det(model=other.pt)", "mask-pca")]
+    # compared once, a plug-in is its spec; +aware stays
+    assert compare_pair(a, c)["a"]["name"] == "net:Det"
+    d = plugin("d", {"model": "m.pt"}, [1, 1, 1, 1], aware="+aware")
+    assert compare_pair(d, c)["a"]["name"] == "net:Det+aware"

@@ -18,7 +18,9 @@ from graspsim.detectors import (
     PluginDetector,
     check_detections,
     check_detector,
+    detector_label,
     load_detector,
+    parse_detector_options,
     plugin_names,
 )
 
@@ -85,6 +87,24 @@ def failing_factory():
 
 
 instance = Det()
+
+
+class WithOptions:
+    # A network wrapper: its checkpoint and settings come as keyword arguments.
+    def __init__(self, model, top_k=1, scale=1.0):
+        self.model, self.top_k, self.scale = model, top_k, scale
+
+    def predict(self, obs):
+        return []
+
+
+class NeedsVision:
+    # Imports a package that is not installed when it is built.
+    def __init__(self):
+        import not_installed_vision_q  # noqa: F401
+
+    def predict(self, obs):
+        return []
 """
 
 
@@ -162,7 +182,7 @@ def test_module_in_the_current_folder_loads(plugin_dir):
     ("{mod}:Nope", "has no attribute 'Nope'"),
     ("{mod}:NoPredict", "NoPredict gave a NoPredict with no predict"),
     ("{mod}:failing_factory", "calling failing_factory.*OSError: checkpoint missing"),
-    ("{broken}:Det", "importing .* failed: ModuleNotFoundError.*not_installed_dep_q"),
+    ("{broken}:Det", "importing mydet_broken failed: No module named .not_installed_dep_q."),
     ("{syntax}:Det", "importing .* failed: SyntaxError"),
 ])
 def test_bad_plugins_give_one_line_errors(plugin_dir, spec, match):
@@ -336,3 +356,159 @@ def test_pipeline_baselines_take_plugins(plugin_dir):
     assert s["n"] == 2 and s["detector"] == f"{name}:Det"
     lines = (root / "trials" / f"{name}:Det" / "trials.jsonl").read_text().splitlines()
     assert len(lines) == 2 and json.loads(lines[0])["score"] == 0.5
+
+
+# --- options -----------------------------------------------------------------------------------
+def test_detector_options_parse_json_values_else_text():
+    opts = parse_detector_options(["model=runs/net/model.pt", "top_k=5", "scale=0.5",
+                                   "aware=true", "sizes=[224, 300]", 'name="5"', "empty="])
+    assert opts == {"model": "runs/net/model.pt", "top_k": 5, "scale": 0.5, "aware": True,
+                    "sizes": [224, 300], "name": "5", "empty": ""}
+    assert list(opts) == ["model", "top_k", "scale", "aware", "sizes", "name", "empty"]
+    for bad, match in (("model", "KEY=VALUE"), ("2x=1", "identifier"), ("=1", "KEY=VALUE")):
+        with pytest.raises(ValueError, match=match):
+            parse_detector_options([bad])
+    with pytest.raises(ValueError, match="given twice"):
+        parse_detector_options(["a=1", "a=2"])
+
+
+def test_detector_label_says_the_options_shortly():
+    assert detector_label("m:Det") == detector_label("m:Det", {}) == "m:Det"
+    long = "/home/someone/experiments/2026-12-05/grconvnet3/epoch_30_iou_0.97"
+    label = detector_label("m:Det", {"top_k": 5, "model": long, "sizes": [224, 300]})
+    assert label == "m:Det(model=epoch_30_iou_0.97,sizes=[224,300],top_k=5)"
+    assert detector_label("m:Det", {"note": "x" * 60}) == "m:Det(note=" + "x" * 21 + "...)"
+    # keys sorted: the same options in another order give the same name
+    assert detector_label("m:D", {"b": 1, "a": 2}) == detector_label("m:D", {"a": 2, "b": 1})
+
+
+def test_plugin_options_reach_the_constructor(plugin_dir, tmp_path_factory):
+    folder, write = plugin_dir
+    name = write("mydet_options")
+    spec = f"{name}:WithOptions"
+    opts = {"model": "runs/net/model.pt", "top_k": 3}
+    check_detector(spec, opts)
+    det = load_detector(spec, opts)
+    assert (det.detector.model, det.detector.top_k, det.detector.scale) == (
+        "runs/net/model.pt", 3, 1.0)
+    assert det.label == f"{spec}(model=model.pt,top_k=3)"
+    # a worker process builds it again with the same options
+    code = ("import pickle, sys\n"
+            "det = pickle.loads(sys.stdin.buffer.read())\n"
+            "print(det.detector.model, det.detector.top_k, det.label)\n")
+    out = subprocess.run([sys.executable, "-c", code], input=pickle.dumps(det),
+                         cwd=tmp_path_factory.mktemp("worker"), capture_output=True, check=True)
+    assert out.stdout.decode().split() == ["runs/net/model.pt", "3", det.label]
+    # a class that needs an argument says how to give it; an unknown option is named
+    for check in (check_detector, load_detector):
+        with pytest.raises(ValueError, match="model.*--detector-option KEY=VALUE") as err:
+            check(spec)
+        assert "\n" not in str(err.value)
+        with pytest.raises(ValueError, match="depth_scale"):
+            check(spec, {"model": "m.pt", "depth_scale": 2})
+    # an instance takes no options; a saved model neither
+    with pytest.raises(ValueError, match="takes no options"):
+        load_detector(f"{name}:instance", {"top_k": 2})
+    with pytest.raises(ValueError, match="not a Python identifier"):
+        load_detector(spec, {"no good": 1})
+    # built-in detectors take their class's parameters
+    assert load_detector("mask-pca", {"margin_px": 9.0}).margin_px == 9.0
+
+
+def test_a_missing_package_is_named(plugin_dir):
+    _, write = plugin_dir
+    name = write("mydet_vision")
+    broken = write("mydet_vision_import", "import numpy\nimport not_installed_vision_q\n")
+    with pytest.raises(ValueError) as err:
+        load_detector(f"{name}:NeedsVision")
+    msg = str(err.value)
+    assert msg.startswith(f"plug-in '{name}:NeedsVision': NeedsVision() failed importing "
+                          "not_installed_vision_q: No module named 'not_installed_vision_q'")
+    assert "factory taking no argument" not in msg and "\n" not in msg
+    for call in (load_detector, check_detector):
+        with pytest.raises(ValueError) as err:
+            call(f"{broken}:Det")
+        assert str(err.value).startswith(
+            f"plug-in '{broken}:Det': importing {broken} failed: No module named "
+            "'not_installed_vision_q'")
+
+
+def test_options_are_recorded_and_checked_on_resume(plugin_dir, capsys):
+    from graspsim.cli import main
+    from graspsim.trials import run_trials
+
+    folder, write = plugin_dir
+    name = write("mydet_record")
+    spec = f"{name}:WithOptions"
+    out = folder / "t"
+    s = run_trials(spec, "test", n=0, out=out, config=_cfg(0),
+                   detector_options={"model": "nets/a/model.pt", "top_k": 2})
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["detector_options"] == {"model": "nets/a/model.pt", "top_k": 2}
+    assert cfg["detector"] == s["detector"] == f"{spec}(model=model.pt,top_k=2)"
+    run_trials(spec, "test", n=0, out=out, config=_cfg(0),
+               detector_options={"top_k": 2, "model": "nets/a/model.pt"})  # same: resumes
+    with pytest.raises(ValueError, match="another configuration"):
+        run_trials(spec, "test", n=0, out=out, config=_cfg(0),
+                   detector_options={"model": "nets/b/model.pt", "top_k": 2})
+    # without options nothing new is recorded: folders written before options still resume
+    plain = folder / "plain"
+    run_trials("mask-pca", "test", n=0, out=plain, config=_cfg(0))
+    assert "detector_options" not in json.loads((plain / "config.json").read_text())
+    # the command line
+    assert main(["trials", "--detector", spec, "--detector-option", "model=nets/c/net.pt",
+                 "--detector-option", "scale=0.5", "--n", "0", "--candidates", "0",
+                 "--out", str(folder / "cli")]) == 0
+    assert capsys.readouterr().out.startswith(f"{spec}(model=net.pt,scale=0.5): success")
+    cfg = json.loads((folder / "cli" / "config.json").read_text())
+    assert cfg["detector_options"] == {"model": "nets/c/net.pt", "scale": 0.5}
+    assert main(["trials", "--detector", spec, "--n", "0", "--out", str(folder / "c2")]) == 2
+    assert "--detector-option" in capsys.readouterr().err
+
+
+def test_run_config_takes_a_detector_options_table(plugin_dir):
+    from graspsim import pipeline
+
+    folder, write = plugin_dir
+    name = write("mydet_table")
+    toml = folder / "campaign.toml"
+    toml.write_text(f'[run]\ntrials = 2\nbaselines = ["mask-pca", "{name}:WithOptions"]\n\n'
+                    f'[run.detector_options."{name}:WithOptions"]\n'
+                    'model = "runs/net/model.pt"\ntop_k = 4\n')
+    config = pipeline.load_config(toml)
+    assert config.detector_options == {f"{name}:WithOptions": {"model": "runs/net/model.pt",
+                                                               "top_k": 4}}
+    det = pipeline._trial_detector(f"{name}:WithOptions", folder / "model", config)
+    assert (det.detector.model, det.detector.top_k) == ("runs/net/model.pt", 4)
+    with pytest.raises(ValueError, match="baselines: plug-in .*model"):
+        pipeline.load_config(baselines=[f"{name}:WithOptions"])  # its argument is missing
+    with pytest.raises(ValueError, match="not among the baselines"):
+        pipeline.load_config(baselines=["mask-pca"],
+                             detector_options={f"{name}:WithOptions": {"model": "m"}})
+    # a recorded run without the setting is the same configuration as one with no options
+    recorded = {k: v for k, v in pipeline.asdict(pipeline.RunConfig()).items()
+                if k != "detector_options"}
+    assert pipeline._recorded_config(recorded) == json.loads(json.dumps(
+        pipeline.asdict(pipeline.RunConfig())))
+
+
+@pytest.mark.sim
+def test_run_trial_stage_passes_and_records_the_options(plugin_dir):
+    from graspsim import pipeline
+    from graspsim.executor import Executor
+
+    folder, write = plugin_dir
+    name = write("mydet_stage")
+    spec = f"{name}:WithOptions"
+    config = pipeline.load_config(trials=1, trial_candidates=0, baselines=[spec],
+                                  detector_options={spec: {"model": "runs/net/m.pt"}})
+    root = folder / "run"
+    root.mkdir()
+    stages = pipeline._Stages(root)
+    stages.finish("trials/dlsr", {"n": 0})
+    stages.finish("trials/dlsr-paper", {"n": 0})
+    pipeline.trial_stage(root, config, stages, root / "model" / "dlsr", seed=3,
+                         executor=Executor("sequential", progress=False), progress=False)
+    cfg = json.loads((root / "trials" / spec / "config.json").read_text())
+    assert cfg["detector_options"] == {"model": "runs/net/m.pt"}
+    assert cfg["detector"] == stages.get(f"trials/{spec}")["detector"] == f"{spec}(model=m.pt)"
