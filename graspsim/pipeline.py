@@ -35,7 +35,7 @@ from .runplan import departs_from_paper, trial_names  # noqa: F401 (public here 
 log = logging.getLogger(__name__)
 
 __all__ = ["RunConfig", "load_config", "run_folder", "run_job", "resume_job",
-           "objectwise_validation", "QUICK"]
+           "objectwise_validation", "trial_detector", "QUICK"]
 
 
 @dataclass
@@ -616,7 +616,7 @@ def trial_stage(root: Path, config: RunConfig, stages, model_path: Path, seed: i
         if stages.done(key):
             continue
         t0 = time.perf_counter()
-        det = _trial_detector(name, model_path, config, hand=config.gripper)
+        det = trial_detector(name, model_path, config, hand=config.gripper)
         options = config.detector_options.get(name) or None
         s = run_trials(det, objects=config.object_set("trial_objects"), n=config.trials,
                        seed=seed,
@@ -635,8 +635,22 @@ def _paper_model_path(model_path: Path, config: RunConfig) -> Path:
     return model_path.with_name("dlsr-paper") if config.physical else model_path
 
 
-def _trial_detector(name: str, model_path: Path, config: RunConfig, hand: str = "builtin"):
-    """The detector ``name`` of the trial stage (DLSR's made aware of ``hand``'s geometry)."""
+def trial_detector(name: str, model_path: Path, config: RunConfig, hand: str = "builtin"):
+    """The detector ``name`` of the trial stage, as ``graspsim run`` builds it.
+
+    Parameters
+    ----------
+    name : str
+        ``"dlsr"`` (the model at ``model_path`` with ``config``'s detector options, made aware
+        of ``hand``'s geometry), ``"dlsr-paper"`` (the paper's model beside it, its dense
+        search) or any name :func:`graspsim.detectors.load_detector` takes (with
+        ``config.detector_options``).
+    model_path : Path
+        The saved DLSR model (``model/dlsr`` of a run).
+    config : RunConfig
+    hand : str
+        The hand the gripper-aware check judges with.
+    """
     if name in ("dlsr", "dlsr-paper"):
         from dlsr.detection import DLSRDetector
 

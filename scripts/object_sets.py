@@ -32,7 +32,7 @@ from pathlib import Path
 from graspsim.compare import compare_outcomes
 from graspsim.executor import Executor
 from graspsim.object_sets import parse_object_set
-from graspsim.pipeline import RunConfig, _trial_detector, run_job
+from graspsim.pipeline import RunConfig, run_job, trial_detector
 from graspsim.trials import TrialConfig, run_trials, wilson_interval
 
 DETECTORS = ("dlsr", "dlsr-paper", "mask-pca", "oracle")
@@ -71,7 +71,7 @@ def main(argv=None) -> int:
                         progress=True)
     trial_cfg = TrialConfig(n_candidates=config.trial_candidates, sampler=config.label_sampler)
     for name in names:
-        run_trials(_trial_detector(name, model_path, config), objects=oset, n=args.n,
+        run_trials(trial_detector(name, model_path, config), objects=oset, n=args.n,
                    seed=args.seed, out=folder / name, config=trial_cfg, executor=executor,
                    progress=True, detector_name=name, labels=folder / "labels")
     table = trial_table(folder, names, oset, args.graspability)

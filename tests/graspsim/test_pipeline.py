@@ -401,7 +401,7 @@ def test_scene_and_gripper_reach_the_dataset_and_the_trials(tmp_path, monkeypatc
     assert (recorded["scene"], recorded["gripper"]) == ("packed", "franka")
 
     calls = []
-    monkeypatch.setattr(pipeline, "_trial_detector",
+    monkeypatch.setattr(pipeline, "trial_detector",
                         lambda name, path, config, hand="builtin": (name, hand))
     monkeypatch.setattr("graspsim.trials.run_trials",
                         lambda det, **kw: calls.append((det, kw)) or {"n": 0})

@@ -478,7 +478,7 @@ def test_run_config_takes_a_detector_options_table(plugin_dir):
     config = pipeline.load_config(toml)
     assert config.detector_options == {f"{name}:WithOptions": {"model": "runs/net/model.pt",
                                                                "top_k": 4}}
-    det = pipeline._trial_detector(f"{name}:WithOptions", folder / "model", config)
+    det = pipeline.trial_detector(f"{name}:WithOptions", folder / "model", config)
     assert (det.detector.model, det.detector.top_k) == ("runs/net/model.pt", 4)
     with pytest.raises(ValueError, match="baselines: plug-in .*model"):
         pipeline.load_config(baselines=[f"{name}:WithOptions"])  # its argument is missing
