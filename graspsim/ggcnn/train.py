@@ -7,7 +7,8 @@ reproducible. The network is a parameter (:data:`graspsim.ggcnn.model.NETWORKS`)
 Same data, seed, options and device give the same weights: the weights are initialised from
 ``torch.manual_seed(seed)`` (inside :func:`torch.random.fork_rng`, so the caller's torch
 generator is untouched), every batch and augmentation is drawn from
-``numpy.random.default_rng([seed, batch])`` (so a resumed run draws what an uninterrupted one
+``numpy.random.default_rng([seed, batch])`` and GR-ConvNet's dropout masks from a torch
+generator seeded from ``(seed, batch)`` (so a resumed run draws what an uninterrupted one
 would), and deterministic algorithms run on a fixed number of threads.
 """
 
@@ -32,7 +33,7 @@ from .model import FILTERS, FORMAT, model_paths, network_of, require_torch, save
 log = logging.getLogger(__name__)
 
 __all__ = ["prepare_samples", "augment", "train_network", "train_ggcnn", "train_grconvnet",
-           "train_from_folder"]
+           "trainer", "train_from_folder"]
 
 
 def prepare_samples(samples, crop: int = 300, input_size: int = 300,
@@ -374,10 +375,14 @@ def train_network(samples, out, network: str, arch: dict, steps: int = 20_000, s
                 xb, yb = _batch(X, R, rng, batch_size, input_size, do_augment, spec)
                 xt = torch.from_numpy(xb).to(device)
                 yt = torch.from_numpy(yb).to(device)
-                pred = net(xt)
-                loss = sum(loss_fn(pred[:, k], yt[:, k]) for k in range(4))
-                opt.zero_grad()
-                loss.backward()
+                # dropout's masks from a generator of (seed, batch) alone, not the caller's
+                with torch.random.fork_rng(devices=[] if device == "cpu" else None):
+                    torch.manual_seed(int(np.random.SeedSequence([int(seed), b, 1])
+                                          .generate_state(1)[0]))
+                    pred = net(xt)
+                    loss = sum(loss_fn(pred[:, k], yt[:, k]) for k in range(4))
+                    opt.zero_grad()
+                    loss.backward()
                 opt.step()
                 window.append(float(loss.detach()))
                 running = float(np.mean(window[-every:]))
@@ -416,6 +421,11 @@ def train_from_folder(data, format: str, out, scale=None, mapping=None,
     readers DLSR uses)."""
     from graspsim.benchmarks import load_samples
 
-    train = {FORMAT: train_ggcnn, "grconvnet": train_grconvnet}[network_of(network).name]
     samples = load_samples(data, format, scale, mapping)
-    return train(samples, out, **options)
+    return trainer(network)(samples, out, **options)
+
+
+def trainer(network: str):
+    """The training function of a network with its defaults: :func:`train_ggcnn` for
+    ``"ggcnn"``, :func:`train_grconvnet` for ``"grconvnet"``."""
+    return {FORMAT: train_ggcnn, "grconvnet": train_grconvnet}[network_of(network).name]
