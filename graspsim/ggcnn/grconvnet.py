@@ -1,9 +1,9 @@
 """GR-ConvNet, the generative residual grasp network, as a second network of this package.
 
 Kumra, Joshi and Sahin, "Antipodal Robotic Grasping using Generative Residual Convolutional
-Neural Network", IROS 2020 (arXiv:1909.04810) [1]_; v2: "GR-ConvNet v2: A Real-Time
-Multi-Grasp Detection Network for Robotic Grasping", Sensors 22(16), 6208, 2022 [2]_. The
-figures below are facts read from the paper and from its authors' code [3]_
+Neural Network", IROS 2020 (arXiv:1909.04810); v2: "GR-ConvNet v2: A Real-Time Multi-Grasp
+Detection Network for Robotic Grasping", Sensors 22(16), 6208, 2022 (references below). The
+figures below are facts read from the paper and from its authors' code, skumra/robotic-grasping
 (``inference/models/grconvnet3.py``, ``inference/models/grasp_model.py``,
 ``utils/data/grasp_data.py``, ``utils/data/cornell_data.py``, ``utils/data/jacquard_data.py``,
 ``utils/dataset_processing/image.py``, ``inference/post_process.py``, ``train_network.py``;
@@ -27,8 +27,9 @@ shipped by the authors):
   Jacquard models were trained without);
 * convolution weights initialised Xavier-uniform (gain 1), the rest as PyTorch does.
 
-At k = 32 with 4 input channels this is 1,900,900 trainable parameters (the paper: "1.9
-million"; the authors' ``arch.txt`` of their Cornell model lists 1,900,900);
+At k = 32 with 4 input channels this is 1,900,900 trainable parameters (the authors'
+``trained-models/cornell-randsplit-rgbd-grconvnet3-drop1-ch32/arch.txt`` lists 1,900,900;
+about 1.9 million); at k = 16, 479,156;
 :func:`grconvnet_parameter_count` counts them from the layer list above, a test checks it
 against the network.
 
@@ -51,16 +52,16 @@ GG-CNN's (:func:`graspsim.ggcnn.maps.crop_box`). Read-out (``post_process.py``):
 angle Gaussian-filtered with sigma 2; here the cos and sin maps are filtered instead of the
 angle (:func:`graspsim.ggcnn.maps.decode_maps`, shared with GG-CNN).
 
-Reported accuracy by the rectangle metric: 97.7 % on Cornell (RGB-D, image-wise), 96.6 %
-object-wise, 94.6 % on Jacquard [1]_.
+Reported accuracy by the rectangle metric: 97.7 % on Cornell and 94.6 % on Jacquard, at 20 ms
+per image on a GPU (the IROS paper's abstract); v2 reports 98.8 % and 95.1 % (its abstract).
 
-References
-----------
-.. [1] S. Kumra, S. Joshi and F. Sahin, "Antipodal Robotic Grasping using Generative Residual
-   Convolutional Neural Network", IROS 2020, pp. 9626-9633, doi:10.1109/IROS45743.2020.9340777.
-.. [2] S. Kumra, S. Joshi and F. Sahin, "GR-ConvNet v2: A Real-Time Multi-Grasp Detection
-   Network for Robotic Grasping", Sensors 22(16):6208, 2022, doi:10.3390/s22166208.
-.. [3] https://github.com/skumra/robotic-grasping (BSD-3-Clause).
+References:
+
+* S. Kumra, S. Joshi and F. Sahin, "Antipodal Robotic Grasping using Generative Residual
+  Convolutional Neural Network", IROS 2020, pp. 9626-9633, doi:10.1109/IROS45743.2020.9340777.
+* S. Kumra, S. Joshi and F. Sahin, "GR-ConvNet v2: A Real-Time Multi-Grasp Detection Network
+  for Robotic Grasping", Sensors 22(16):6208, 2022, doi:10.3390/s22166208.
+* The authors' code: https://github.com/skumra/robotic-grasping (BSD-3-Clause licence).
 """
 
 from __future__ import annotations

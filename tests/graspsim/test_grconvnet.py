@@ -57,7 +57,7 @@ def trained(tmp_path_factory):
 def test_parameter_count_is_the_published_architectures(k):
     net = build_grconvnet(k)
     assert n_parameters(net) == layer_count(k) == grconvnet_parameter_count(k)
-    if k == 32:  # "1.9 million parameters" (the paper)
+    if k == 32:  # about 1.9 million (the paper; the authors list 1,900,900)
         assert abs(n_parameters(net) - 1.9e6) < 0.01 * 1.9e6
     net.eval()
     with torch.no_grad():
