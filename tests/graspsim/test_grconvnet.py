@@ -241,3 +241,15 @@ def test_run_configs_accept_grconvnet_raw_and_aware(trained, monkeypatch):
     monkeypatch.chdir(path.parent)
     cfg = RunConfig(baselines=["mask-pca", "model", "model+aware"]).validated()
     assert trial_names(cfg)[-2:] == ["model", "model+aware"]
+
+
+def test_clutter_rounds_run_it_gripper_aware(trained, easy_objects):
+    from graspsim.declutter import run_rounds
+    from graspsim.trials import TrialConfig
+
+    path, _ = trained
+    s = run_rounds(str(path) + "+aware", easy_objects, n=1, seed=0,
+                   config=TrialConfig(n_candidates=0, n_objects=2))
+    (r,) = s["records"]
+    assert r["attempts"]
+    assert not str(r["end"]).startswith("detector error")
