@@ -24,6 +24,7 @@ from dlsr.records import read_json, write_text_atomic
 
 from .backend import INSTALL_HINT, require_torch
 from .grconvnet import build_grconvnet
+from .maps import WIDTH_SCALE
 
 __all__ = [
     "INSTALL_HINT",
@@ -144,7 +145,7 @@ class Network:
 
     def width_scale(self, input_size: int) -> float:
         """Pixels of opening that make a width value of 1 at this input side."""
-        return 150.0 if self.width == "fixed" else float(input_size) / 2
+        return WIDTH_SCALE if self.width == "fixed" else float(input_size) / 2
 
     def build(self, arch: dict):
         """A freshly initialised network of the ``arch`` fields (a ``MODEL.json`` record)."""
