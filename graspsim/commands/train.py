@@ -54,13 +54,13 @@ def register(subparsers) -> None:
                     "on every positive rectangle of a dataset and save MODEL.pt (weights) + "
                     "MODEL.json. Resumes from MODEL.ckpt.pt when rerun with the same data and "
                     "options. Use the model with `graspsim trials --detector MODEL`. A "
-                    "sample-step costs 2.3-2.5 times as much at k = 32 as at k = 16 "
+                    "sample-step costs about twice as much at k = 32 as at k = 16 "
                     "(scripts/bench_grconvnet.py).",
     )
     _add_common(r, crop=224, multiple=4)
     r.add_argument("--channels", type=int, choices=[16, 32], default=32,
                    help="k, the filters of the first layer: 32 the paper's (1.9M parameters), "
-                        "16 the authors' small model (0.48M), 2.3-2.5 times cheaper per step")
+                        "16 the authors' small model (0.48M), about half the cost per step")
     r.add_argument("--dropout", type=float, default=0.1,
                    help="dropout probability before each head while training (0: none; "
                         "default %(default)s, the authors' training default)")

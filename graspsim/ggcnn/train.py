@@ -214,7 +214,7 @@ do_augment, checkpoint_every, snapshots, snapshot_seconds, threads, progress :
         As :func:`train_network` (``input_size`` a multiple of 4).
     channels : int
         ``k``, the filters of the first layer (32 in the paper; 16 the authors' small model,
-        2.3-2.5 times cheaper per sample-step on 2 CPU cores: ``scripts/bench_grconvnet.py``).
+        about half the cost per sample-step on 2 CPU cores: ``scripts/bench_grconvnet.py``).
     dropout : float
         Dropout probability before each head while training (0: none).
 
