@@ -43,8 +43,8 @@ def prepare_samples(samples, crop: int = 300, input_size: int = 300,
     images.
 
     The crop is chosen from the observation alone (:func:`graspsim.ggcnn.detector.crop_input`),
-    as at test time. Images without positives or without any valid depth are skipped with a
-    logged line naming them.
+    as at test time. Images without positives or without any valid depth (or, for RGB-D, without
+    a colour image of the depth's size) are skipped with a logged line naming them.
 
     Parameters
     ----------
@@ -74,6 +74,9 @@ def prepare_samples(samples, crop: int = 300, input_size: int = 300,
     for s in samples:
         if not s.positives:
             log.info("%s training: skipped %s (no positive rectangle)", title, s.image_id)
+            continue
+        if inputs == "rgbd" and getattr(s, "rgb", None) is None:
+            log.info("%s training: skipped %s (no colour image)", title, s.image_id)
             continue
         try:
             x, (row0, col0, scale) = crop_input(s.depth, s.depth_valid, crop, input_size,

@@ -78,6 +78,16 @@ def test_rgbd_input_is_depth_then_normalised_colour():
         prepare_rgb(s.rgb[..., 0])
     with pytest.raises(ValueError, match="rgb has shape"):
         crop_input(s.depth, s.depth_valid, 72, 48, "centre", s.rgb[:70])
+    # an image without colour, or with colour of another size, is skipped with a logged line
+    from graspsim.ggcnn.train import prepare_samples
+
+    bad = tiny_samples(3)
+    bad[0].rgb = None
+    bad[1].rgb = bad[1].rgb[:70]
+    X, R, ids = prepare_samples(bad, 72, 48, "centre", "rgbd", "GR-ConvNet")
+    assert X.shape == (1, 4, 48, 48) and ids == [bad[2].image_id]
+    with pytest.raises(ValueError, match="no image to train GR-ConvNet on"):
+        prepare_samples(bad[:2], 72, 48, "centre", "rgbd", "GR-ConvNet")
 
 
 def test_quarter_turn_augmentation_moves_every_channel_and_the_rectangles(rng):
