@@ -106,17 +106,21 @@ def _register_detection(sub) -> None:
                    "--recognition, else 1)")
     d.add_argument("--recognition", default=None, metavar="JSON",
                    help="recognition.json: take the most often chosen encoder parameter and C")
-    add_detector_arguments(d, kinds=("dense", "exact", "lattice", "ggcnn"))
+    add_detector_arguments(d, kinds=("dense", "exact", "lattice", "ggcnn", "grconvnet"))
     d.add_argument("--ggcnn-steps", type=int, default=20_000, metavar="N",
-                   help="--detector ggcnn (the GG-CNN peer trained per fold; needs the cnn "
-                        "extra): sample-steps of each fold's training")
-    d.add_argument("--ggcnn-device", default="cpu", help="GG-CNN: cpu or cuda")
-    d.add_argument("--ggcnn-input-size", type=int, default=300, metavar="S",
-                   help="GG-CNN: network input side (the 300 px crop is resized to it)")
+                   help="--detector ggcnn or grconvnet (the CNN peer trained per fold; needs "
+                        "the cnn extra): sample-steps of each fold's training")
+    d.add_argument("--ggcnn-device", default="cpu", help="GG-CNN, GR-ConvNet: cpu or cuda")
+    d.add_argument("--ggcnn-input-size", type=int, default=None, metavar="S",
+                   help="GG-CNN, GR-ConvNet: network input side, the crop (300 px, 224 px) "
+                        "is resized to it (default: the crop's side)")
+    d.add_argument("--grconvnet-channels", type=int, choices=[16, 32], default=32,
+                   metavar="K", help="GR-ConvNet: k, the filters of the first layer (16 or 32, "
+                                     "default 32)")
     d.add_argument("--paired", action="store_true",
-                   help="GG-CNN: also run DLSR's benchmark (the DLSR options given here, the "
-                        "preset's detector) on the same folds into OUT/dlsr and test the two "
-                        "image by image (exact McNemar)")
+                   help="GG-CNN, GR-ConvNet: also run DLSR's benchmark (the DLSR options given "
+                        "here, the preset's detector) on the same folds into OUT/dlsr and test "
+                        "the two image by image (exact McNemar)")
     d.add_argument("--coarse-to-fine", action="store_true",
                    help="dense detector: coarse grid first, then the full grid near the best")
     d.add_argument("--rescore", type=int, default=300,
@@ -155,11 +159,16 @@ def _ggcnn(args: argparse.Namespace) -> int:
     from graspsim.detector_options import options_from_args
     from graspsim.ggcnn.evaluate import ggcnn_detection_benchmark
 
+    network = args.detector
+    if network == "ggcnn":  # the options of GG-CNN's earlier runs (the same fold models)
+        cnn = {"input_size": args.ggcnn_input_size or 300}
+    else:
+        cnn = {"input_size": args.ggcnn_input_size or 224, "channels": args.grconvnet_channels}
     s = ggcnn_detection_benchmark(
         data=args.data, format=args.format, out=args.out, scale=args.scale,
         mapping=args.mapping, split=args.split, n_folds=args.folds, seed=args.seed,
         steps=args.ggcnn_steps, device=args.ggcnn_device, max_images=args.max_images,
-        paired=args.paired, input_size=args.ggcnn_input_size,
+        paired=args.paired, network=network, **cnn,
         dlsr_options=dict(  # DLSR's options on this command line (the dense grid search)
             learner=args.learner, encoder=args.encoder, encoder_param=args.encoder_param,
             C=args.C, recognition_json=args.recognition, n_atoms=args.atoms,
@@ -170,7 +179,8 @@ def _ggcnn(args: argparse.Namespace) -> int:
             # the preset's DLSR detector, with the DLSR flags given here
             options=options_from_args(argparse.Namespace(**{**vars(args), "detector": None})),
             executor=executor_from_args(args)))
-    line = (f"wrote {args.out}/ggcnn.json and ggcnn.md: GG-CNN accuracy "
+    title = "GG-CNN" if network == "ggcnn" else "GR-ConvNet"
+    line = (f"wrote {args.out}/{network}.json and {network}.md: {title} accuracy "
             f"{100 * s['accuracy']:.2f} % ({s['successes']}/{s['n']}, {args.split}-wise)")
     if "vs_dlsr" in s:
         line += (f"; DLSR {100 * s['dlsr_accuracy']:.2f} % on the same images, exact McNemar "
@@ -183,10 +193,10 @@ def _detection(args: argparse.Namespace) -> int:
     from graspsim.benchmarks import detection_benchmark
     from graspsim.detector_options import options_from_args
 
-    if args.detector == "ggcnn":
+    if args.detector in ("ggcnn", "grconvnet"):
         return _ggcnn(args)
     if args.paired:
-        raise ValueError("--paired is for --detector ggcnn")
+        raise ValueError("--paired is for --detector ggcnn or grconvnet")
 
     param = args.encoder_param
     if param is not None and args.encoder in ("OMP", "mOMP"):

@@ -1,8 +1,10 @@
-"""The GG-CNN grasp detector of the harness: a saved model's maps read as ranked rectangles.
+"""The CNN grasp detectors of the harness: a saved model's maps read as ranked rectangles.
 
-:class:`GGCNNDetector` follows the :class:`graspsim.detectors.GraspDetector` protocol, so it
-runs wherever a detector does (``graspsim trials --detector MODEL``, ``graspsim run``
-baselines, :func:`graspsim.detectors.gripper_aware`).
+:class:`GGCNNDetector` reads any saved network of this package (GG-CNN or GR-ConvNet, by the
+model's ``format``; :class:`GRConvNetDetector` insists on GR-ConvNet) and follows the
+:class:`graspsim.detectors.GraspDetector` protocol, so it runs wherever a detector does
+(``graspsim trials --detector MODEL``, ``graspsim run`` baselines,
+:func:`graspsim.detectors.gripper_aware`).
 """
 
 from __future__ import annotations
@@ -12,17 +14,18 @@ import time
 
 import numpy as np
 
-from .maps import WIDTH_SCALE, crop_box, decode_maps, prepare_depth
-from .model import load_model
+from .maps import WIDTH_SCALE, crop_box, decode_maps, prepare_depth, prepare_rgb
+from .model import FORMAT, load_model, network_of
 
-__all__ = ["GGCNNDetector", "crop_input", "plugin", "MODEL_ENV"]
+__all__ = ["GGCNNDetector", "GRConvNetDetector", "crop_input", "network_input", "plugin",
+           "MODEL_ENV"]
 
 #: Environment variable naming the model the ``ggcnn`` plug-in name loads.
 MODEL_ENV = "GRASPSIM_GGCNN_MODEL"
 
 
-def crop_input(depth, valid, crop: int, input_size: int, method: str = "object"):
-    """The network's input of one depth image and where it came from.
+def crop_input(depth, valid, crop: int, input_size: int, method: str = "object", rgb=None):
+    """The network's input of one depth (or RGB-D) image and where it came from.
 
     Parameters
     ----------
@@ -35,11 +38,14 @@ def crop_input(depth, valid, crop: int, input_size: int, method: str = "object")
         Side of the network's input; the crop is resized to it.
     method : {"object", "centre"}
         Where the crop is centred (from the observation alone).
+    rgb : ndarray of shape (H, W, 3), uint8, or None
+        The colour image registered with ``depth``: GR-ConvNet's input also holds it.
 
     Returns
     -------
-    x : ndarray of shape (input_size, input_size), float32
-        Preprocessed depth (:func:`graspsim.ggcnn.maps.prepare_depth`).
+    x : ndarray of shape (input_size, input_size), or (4, input_size, input_size) with ``rgb``
+        Preprocessed depth (:func:`graspsim.ggcnn.maps.prepare_depth`), float32; with ``rgb``
+        followed by R, G, B (:func:`graspsim.ggcnn.maps.prepare_rgb`).
     box : (row0, col0, scale)
         Crop corner in the image and ``input_size / side``: an input pixel ``(c, r)`` is the
         image pixel ``(col0 + c / scale, row0 + r / scale)``.
@@ -56,19 +62,58 @@ def crop_input(depth, valid, crop: int, input_size: int, method: str = "object")
     v = None if valid is None else np.asarray(valid, dtype=bool)[row0:row0 + side,
                                                                  col0:col0 + side]
     x = prepare_depth(d, v)
+    interpolation = cv2.INTER_AREA if side > input_size else cv2.INTER_LINEAR
     if side != input_size:
-        x = cv2.resize(x, (input_size, input_size), interpolation=cv2.INTER_AREA
-                       if side > input_size else cv2.INTER_LINEAR)
+        x = cv2.resize(x, (input_size, input_size), interpolation=interpolation)
+    if rgb is not None:
+        rgb = np.asarray(rgb)
+        if rgb.shape[:2] != depth.shape:
+            raise ValueError(f"rgb has shape {rgb.shape}, depth {depth.shape}")
+        c = prepare_rgb(rgb[row0:row0 + side, col0:col0 + side])
+        if side != input_size:
+            c = np.stack([cv2.resize(ch, (input_size, input_size), interpolation=interpolation)
+                          for ch in c])
+        x = np.concatenate([x[None], c])
     return x.astype(np.float32), (row0, col0, input_size / side)
 
 
-class GGCNNDetector:
-    """GG-CNN (Morrison et al., RSS 2018) trained by :func:`graspsim.ggcnn.train.train_ggcnn`.
+def network_input(obs, meta: dict):
+    """The input of a saved model's network (``MODEL.json``'s record ``meta``) of one
+    observation, channels first, and the crop it covers.
 
-    Each call crops the depth image around the object found from depth (or the centre),
-    preprocesses it, runs the network and returns the ``top_k`` highest peaks of the filtered
-    quality map as rectangles (opening from the width map, jaw size half the opening), with
-    the filtered quality as scores.
+    Parameters
+    ----------
+    obs : dict
+        ``depth``, optionally ``depth_valid``, and ``rgb`` for a network that reads colour.
+    meta : dict
+        The model's record (:func:`graspsim.ggcnn.model.load_model`).
+
+    Returns
+    -------
+    x : ndarray of shape (C, S, S), float32
+    box : (row0, col0, scale)
+        As :func:`crop_input`.
+    """
+    spec = network_of(meta.get("format", FORMAT))
+    rgb = None
+    if spec.inputs == "rgbd":
+        rgb = obs.get("rgb")
+        if rgb is None:
+            raise ValueError(f"{spec.title} needs the colour image: the observation has no "
+                             "'rgb'")
+    x, box = crop_input(obs["depth"], obs.get("depth_valid"), int(meta["crop"]),
+                        int(meta["input_size"]), meta.get("crop_method", "object"), rgb)
+    return (x[None] if x.ndim == 2 else x), box
+
+
+class GGCNNDetector:
+    """GG-CNN (Morrison et al., RSS 2018) trained by :func:`graspsim.ggcnn.train.train_ggcnn`,
+    or any saved network of this package (GR-ConvNet: :class:`GRConvNetDetector`).
+
+    Each call crops the depth image (and the colour image, for GR-ConvNet) around the object
+    found from depth (or the centre), preprocesses it, runs the network and returns the
+    ``top_k`` highest peaks of the filtered quality map as rectangles (opening from the width
+    map, jaw size half the opening), with the filtered quality as scores.
 
     Parameters
     ----------
@@ -116,12 +161,11 @@ class GGCNNDetector:
 
         torch = require_torch()
         net, meta = self._loaded()
-        x, box = crop_input(obs["depth"], obs.get("depth_valid"), int(meta["crop"]),
-                            int(meta["input_size"]), meta.get("crop_method", "object"))
+        x, box = network_input(obs, meta)
         if self.threads is not None:
             torch.set_num_threads(int(self.threads))
         with torch.no_grad():
-            t = torch.from_numpy(x)[None, None].to(self.device)
+            t = torch.from_numpy(x)[None].to(self.device)
             out = net(t)[0].cpu().numpy()
         return out, box
 
@@ -143,7 +187,29 @@ class GGCNNDetector:
         return {k: v for k, v in self.__dict__.items() if k not in ("net_", "meta_")}
 
     def __repr__(self):
-        return f"GGCNNDetector({str(self.model)!r}, device={self.device!r}, top_k={self.top_k})"
+        return (f"{type(self).__name__}({str(self.model)!r}, device={self.device!r}, "
+                f"top_k={self.top_k})")
+
+
+class GRConvNetDetector(GGCNNDetector):
+    """GR-ConvNet (Kumra et al., IROS 2020) trained by
+    :func:`graspsim.ggcnn.train.train_grconvnet`: :class:`GGCNNDetector` on depth and colour
+    (the observation needs ``rgb``), refusing a model of another network.
+
+    Parameters
+    ----------
+    model, device, top_k, sigma, min_distance, threads :
+        As :class:`GGCNNDetector`.
+    """
+
+    def _loaded(self):
+        if getattr(self, "net_", None) is None:
+            net, meta = load_model(self.model, self.device)
+            if meta.get("format") != "grconvnet":
+                raise ValueError(f"{self.model}: a {network_of(meta['format']).title} model, "
+                                 "not GR-ConvNet")
+            self.net_, self.meta_ = net, meta
+        return self.net_, self.meta_
 
 
 def plugin() -> GGCNNDetector:

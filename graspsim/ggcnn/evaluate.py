@@ -1,10 +1,11 @@
-"""GG-CNN's offline benchmark: the rectangle metric on DLSR's object-wise folds, paired.
+"""The CNN peers' offline benchmark: the rectangle metric on DLSR's object-wise folds, paired.
 
 :func:`ggcnn_detection_benchmark` splits a dataset into the folds that
 :func:`graspsim.benchmarks.detection_benchmark` uses (:func:`dlsr.datasets.object_wise_folds`
-with the same seed), trains one GG-CNN per fold on the training folds, and checks each test
-image's best rectangle against its positives. With ``paired`` it also runs DLSR's benchmark on
-the same images and compares the two image by image (exact McNemar).
+with the same seed), trains one network (GG-CNN, or GR-ConvNet with ``network="grconvnet"``)
+per fold on the training folds, and checks each test image's best rectangle against its
+positives. With ``paired`` it also runs DLSR's benchmark on the same images and compares the
+two image by image (exact McNemar).
 """
 
 from __future__ import annotations
@@ -27,8 +28,8 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
                               steps: int = 20_000, device: str = "cpu",
                               max_images: int | None = None, paired: bool = False,
                               dlsr_options: dict | None = None, progress: bool = True,
-                              **train_options) -> dict:
-    """Cross-validated GG-CNN detection accuracy by the rectangle metric.
+                              network: str = "ggcnn", **train_options) -> dict:
+    """Cross-validated GG-CNN (or GR-ConvNet) detection accuracy by the rectangle metric.
 
     Parameters
     ----------
@@ -36,9 +37,9 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
         The dataset (:func:`graspsim.benchmarks.load_samples`); images without positives are
         left out, as DLSR's benchmark does.
     out : str or Path
-        Output folder: ``models/`` (one GG-CNN per fold, resumed), ``ggcnn_results.jsonl``
-        (per test image, resumed), ``ggcnn.json`` and ``ggcnn.md``; with ``paired`` DLSR's
-        benchmark in ``out/dlsr``.
+        Output folder: ``models/`` (one network per fold, resumed), ``NAME_results.jsonl``
+        (per test image, resumed), ``NAME.json`` and ``NAME.md``, ``NAME`` the network
+        (``ggcnn``, ``grconvnet``); with ``paired`` DLSR's benchmark in ``out/dlsr``.
     split : {"object", "image"}
     n_folds, seed : int
         As DLSR's benchmark (same folds for the same values).
@@ -53,15 +54,19 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
     dlsr_options : dict or None
         Further keyword options of DLSR's benchmark.
     progress : bool
+    network : {"ggcnn", "grconvnet"}
+        The network trained per fold (:data:`graspsim.ggcnn.model.NETWORKS`).
     **train_options
-        Options of :func:`graspsim.ggcnn.train.train_ggcnn` (``input_size``, ``crop``, ...).
+        Options of :func:`graspsim.ggcnn.train.train_ggcnn` or
+        :func:`~graspsim.ggcnn.train.train_grconvnet` (``input_size``, ``crop``,
+        ``channels``, ...).
 
     Returns
     -------
     dict
-        The content of ``ggcnn.json``: ``accuracy``, ``folds``, ``per_image``,
+        The content of ``NAME.json``: ``accuracy``, ``folds``, ``per_image``,
         ``seconds_per_image``, ``training_seconds`` and, when paired, ``dlsr_accuracy`` and
-        ``vs_dlsr`` (:func:`graspsim.benchmarks.mcnemar_exact`, GG-CNN as ``a``).
+        ``vs_dlsr`` (:func:`graspsim.benchmarks.mcnemar_exact`, the network as ``a``).
     """
     from tqdm.auto import tqdm
 
@@ -70,9 +75,11 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
     from graspsim.benchmarks import detection_benchmark, load_samples, paired_detection_test
 
     from .detector import GGCNNDetector
-    from .model import model_paths, require_torch
-    from .train import train_ggcnn
+    from .model import model_paths, network_of, require_torch
+    from .train import trainer
 
+    spec = network_of(network)
+    name = spec.name
     require_torch()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -91,20 +98,22 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
               "n_folds": n_folds, "seed": seed, "steps": int(steps), "device": device,
               "n_images": len(samples), "train": {k: (list(v) if isinstance(v, tuple) else v)
                                                   for k, v in sorted(train_options.items())}}
+    if name != "ggcnn":  # GG-CNN's keys stay those of its earlier runs (they resume)
+        config["network"] = name
     key = config_key(config)
-    results = out / "ggcnn_results.jsonl"
+    results = out / f"{name}_results.jsonl"
     done = {r["image_id"]: r for r in read_jsonl(results, required=("image_id",), repair=True)
             if r.get("config_key") == key}
     train_seconds = {}
-    bar = tqdm(total=len(samples), initial=len(done), desc="GG-CNN detection",
+    bar = tqdm(total=len(samples), initial=len(done), desc=f"{spec.title} detection",
                disable=not progress)
     for k, (train, test) in enumerate(folds):
-        mpath = out / "models" / f"ggcnn_{key}_fold{k}"
+        mpath = out / "models" / f"{name}_{key}_fold{k}"
         todo = [i for i in test if samples[i].image_id not in done]
         if not model_paths(mpath)[1].is_file():  # resumes from its checkpoint
-            train_ggcnn([samples[i] for i in train], mpath, steps=steps, seed=seed + k,
-                        device=device, progress=progress, **train_options)
-        meta = read_json(model_paths(mpath)[1], "GG-CNN model")
+            trainer(name)([samples[i] for i in train], mpath, steps=steps, seed=seed + k,
+                          device=device, progress=progress, **train_options)
+        meta = read_json(model_paths(mpath)[1], f"{spec.title} model")
         train_seconds[k] = meta["training"]["seconds"]
         if not todo:
             continue
@@ -153,14 +162,14 @@ def ggcnn_detection_benchmark(data, format: str, out, scale=None, mapping=None,
         summary["dlsr_accuracy"] = dl["accuracy"]
         summary["dlsr_successes"] = int(sum(r["success"] for r in dl["per_image"]))
         summary["vs_dlsr"] = paired_detection_test(summary, dl)
-    write_text_atomic(out / "ggcnn.json", json.dumps(summary, indent=2))
-    write_text_atomic(out / "ggcnn.md", ggcnn_markdown(summary))
+    write_text_atomic(out / f"{name}.json", json.dumps(summary, indent=2))
+    write_text_atomic(out / f"{name}.md", ggcnn_markdown(summary))
     return summary
 
 
 def config_key(config: dict) -> str:
-    """The key of a benchmark configuration (``ggcnn.json``'s ``config``): it names the fold
-    models (``OUT/models/ggcnn_KEY_foldK``) and marks the per-image results."""
+    """The key of a benchmark configuration (``NAME.json``'s ``config``): it names the fold
+    models (``OUT/models/NAME_KEY_foldK``) and marks the per-image results."""
     return hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
 
 
@@ -168,12 +177,16 @@ def ggcnn_markdown(summary: dict) -> str:
     """The table of :func:`ggcnn_detection_benchmark`'s summary (Markdown)."""
     from graspsim.trials import wilson_interval
 
+    from .model import network_of
+
     c = summary["config"]
-    rows = [("GG-CNN", summary["successes"], summary["n"])]
+    title = network_of(c.get("network", "ggcnn")).title
+    rows = [(title, summary["successes"], summary["n"])]
     if "dlsr_accuracy" in summary:
         rows.append(("DLSR", summary["dlsr_successes"], summary["n"]))
     lines = [f"Rectangle metric, {c['split']}-wise {c['n_folds']} folds, {c['data']} "
-             f"({summary['n']} images); GG-CNN trained {c['steps']} sample-steps per fold.", "",
+             f"({summary['n']} images); {title} trained {c['steps']} sample-steps per fold.",
+             "",
              "| detector | top-1 correct | accuracy | 95 % CI (Wilson) |", "|---|---|---|---|"]
     for name, k, n in rows:
         lo, hi = wilson_interval(k, n)
@@ -181,6 +194,6 @@ def ggcnn_markdown(summary: dict) -> str:
                      f"{100 * lo:.1f}-{100 * hi:.1f} % |")
     if "vs_dlsr" in summary:
         t = summary["vs_dlsr"]
-        lines += ["", f"Paired (exact McNemar): GG-CNN alone right on {t['a_only']} images, "
+        lines += ["", f"Paired (exact McNemar): {title} alone right on {t['a_only']} images, "
                       f"DLSR alone on {t['b_only']}; p = {t['p_value']:.3g}."]
     return "\n".join(lines) + "\n"

@@ -28,6 +28,7 @@ __all__ = [
     "grasp_maps",
     "decode_maps",
     "prepare_depth",
+    "prepare_rgb",
     "crop_box",
 ]
 
@@ -65,7 +66,8 @@ def _as_rects(rects) -> np.ndarray:
     return arr
 
 
-def grasp_maps(rects, shape, width_scale: float = WIDTH_SCALE, fraction: float = 1 / 3):
+def grasp_maps(rects, shape, width_scale: float = WIDTH_SCALE, fraction: float = 1 / 3,
+               clip_width: bool = False):
     """GG-CNN's training targets: quality, cos 2 phi, sin 2 phi and width maps.
 
     Every pixel inside the centre ``fraction`` of a rectangle along its opening axis (and
@@ -83,6 +85,8 @@ def grasp_maps(rects, shape, width_scale: float = WIDTH_SCALE, fraction: float =
         Pixels that map to a width value of 1.
     fraction : float
         Part of the opening that is labelled (GG-CNN's one third).
+    clip_width : bool
+        Width values above 1 are set to 1 (GR-ConvNet's labels; GG-CNN's are not clipped).
 
     Returns
     -------
@@ -106,7 +110,8 @@ def grasp_maps(rects, shape, width_scale: float = WIDTH_SCALE, fraction: float =
         u = dx * c - dy * s  # along the closing direction (rows grow downward)
         v = dx * s + dy * c  # across it
         inside = (np.abs(u) <= half_u + 1e-9) & (np.abs(v) <= half_v + 1e-9)
-        for k, value in enumerate((1.0, np.cos(2 * phi), np.sin(2 * phi), w / width_scale)):
+        width = min(w / width_scale, 1.0) if clip_width else w / width_scale
+        for k, value in enumerate((1.0, np.cos(2 * phi), np.sin(2 * phi), width)):
             out[k, r0:r1, c0:c1][inside] = value
     return out
 
@@ -211,6 +216,33 @@ def prepare_depth(depth, valid=None) -> np.ndarray:
     d = inpaint_depth(depth, valid)
     d = d - d[np.isfinite(d)].mean()
     return np.clip(np.nan_to_num(d, nan=0.0), -1.0, 1.0).astype(np.float32)
+
+
+def prepare_rgb(rgb) -> np.ndarray:
+    """GR-ConvNet's colour input: values over 255, minus their mean over the whole image.
+
+    Parameters
+    ----------
+    rgb : ndarray of shape (H, W, 3), uint8
+
+    Returns
+    -------
+    ndarray of shape (3, H, W), float32
+        Channels first (R, G, B).
+
+    Raises
+    ------
+    ValueError
+        An image that is not ``(H, W, 3)`` or holds NaN.
+    """
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"rgb must be an (H, W, 3) image, got shape {rgb.shape}")
+    x = rgb.astype(np.float32) / 255.0
+    if not np.isfinite(x).all():
+        raise ValueError("the RGB image holds NaN or infinite values")
+    x -= x.mean()
+    return np.ascontiguousarray(x.transpose(2, 0, 1))
 
 
 def crop_box(depth, valid=None, size: int = 300, method: str = "object"):

@@ -1,25 +1,38 @@
-"""The GG-CNN network and its files (``MODEL.pt`` weights + ``MODEL.json``).
+"""The networks of this package and their files (``MODEL.pt`` weights + ``MODEL.json``).
 
 PyTorch is imported only inside functions (:func:`require_torch`), so the rest of the toolkit
-works without it. The network follows Morrison, Corke and Leitner (RSS 2018): depth only,
-three strided convolutions (9x9/3, 5x5/2, 3x3/2 with 32, 16, 8 filters), three transposed
-convolutions back (3x3/2, 5x5/2, 9x9/3 with 8, 16, 32 filters), ReLU on the hidden layers and
-four linear 2x2 heads (quality, cos 2 phi, sin 2 phi, width): 62,420 parameters. The input
-side must be a multiple of 12 (300 in the paper).
+works without it. Two networks map an image crop to the same four maps (quality, cos 2 phi,
+sin 2 phi, width) and share everything else (labels, training, files, read-out); each is a
+:class:`Network` of :data:`NETWORKS`, named by the ``format`` field of ``MODEL.json``:
+
+* ``"ggcnn"``, GG-CNN (Morrison, Corke and Leitner, RSS 2018): depth only, three strided
+  convolutions (9x9/3, 5x5/2, 3x3/2 with 32, 16, 8 filters), three transposed convolutions back
+  (3x3/2, 5x5/2, 9x9/3 with 8, 16, 32 filters), ReLU on the hidden layers and four linear 2x2
+  heads: 62,420 parameters. The input side must be a multiple of 12 (300 in the paper).
+* ``"grconvnet"``, GR-ConvNet (Kumra, Joshi and Sahin, IROS 2020): depth and RGB,
+  :mod:`graspsim.ggcnn.grconvnet`.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 from dlsr.records import read_json, write_text_atomic
+
+from .backend import INSTALL_HINT, require_torch
+from .grconvnet import build_grconvnet
+from .maps import WIDTH_SCALE
 
 __all__ = [
     "INSTALL_HINT",
     "FILTERS",
     "FORMAT",
+    "Network",
+    "NETWORKS",
+    "network_of",
     "require_torch",
     "build_network",
     "n_parameters",
@@ -29,26 +42,11 @@ __all__ = [
     "load_model",
 ]
 
-INSTALL_HINT = "GG-CNN needs PyTorch: install it with `pip install -e .[cnn]`"
 #: Filters of the three convolutions and the three transposed convolutions (the paper's).
 FILTERS = (32, 16, 8, 8, 16, 32)
 #: The ``format`` field of ``MODEL.json``.
 FORMAT = "ggcnn"
 FORMAT_VERSION = 1
-
-
-def require_torch():
-    """``torch``, or a one-line ``ValueError`` saying how to install it.
-
-    Returns
-    -------
-    module
-    """
-    try:
-        import torch
-    except ImportError:
-        raise ValueError(INSTALL_HINT) from None
-    return torch
 
 
 def build_network(filters=FILTERS):
@@ -100,6 +98,89 @@ def n_parameters(net) -> int:
     return int(sum(p.numel() for p in net.parameters() if p.requires_grad))
 
 
+@dataclass(frozen=True)
+class Network:
+    """One network of this package: how it is built, fed and trained.
+
+    Attributes
+    ----------
+    name : str
+        The ``format`` field of its ``MODEL.json`` (``"ggcnn"``, ``"grconvnet"``).
+    title : str
+        Its name in messages (``"GG-CNN"``).
+    inputs : {"depth", "rgbd"}
+        Depth alone (one channel), or depth then R, G, B (four).
+    arch : tuple of str
+        The ``MODEL.json`` fields that build it (:meth:`build`).
+    multiple : int
+        The input side must be a multiple of this.
+    loss : {"mse", "smooth_l1"}
+        Loss of each of the four maps; the training loss is their sum.
+    rotate : bool or "quarter"
+        Training augmentation: any rotation, or a multiple of 90 degrees.
+    zoom : (float, float) or None
+        Magnification range of the augmentation, drawn uniformly...
+    keep : (float, float) or None
+        ... or as ``1 / f`` with ``f``, the kept central fraction, drawn uniformly.
+    width : {"fixed", "half"}
+        Width maps hold the opening over 150 px (GG-CNN), or clipped to half the input side and
+        divided by it (GR-ConvNet).
+    """
+
+    name: str
+    title: str
+    inputs: str
+    arch: tuple
+    multiple: int
+    loss: str
+    rotate: object
+    zoom: tuple | None
+    keep: tuple | None
+    width: str
+
+    @property
+    def in_channels(self) -> int:
+        """Input channels (1 or 4)."""
+        return 1 if self.inputs == "depth" else 4
+
+    def width_scale(self, input_size: int) -> float:
+        """Pixels of opening that make a width value of 1 at this input side."""
+        return WIDTH_SCALE if self.width == "fixed" else float(input_size) / 2
+
+    def build(self, arch: dict):
+        """A freshly initialised network of the ``arch`` fields (a ``MODEL.json`` record)."""
+        if self.name == FORMAT:
+            return build_network(arch["filters"])
+        return build_grconvnet(int(arch["channels"]), float(arch["dropout"]),
+                               self.in_channels)
+
+    def describe(self, arch: dict) -> str:
+        """The network and its architecture fields, for messages."""
+        return f"{self.title} with " + ", ".join(f"{k} {arch.get(k)}" for k in self.arch)
+
+
+#: The networks by ``format`` name.
+NETWORKS = {
+    FORMAT: Network(FORMAT, "GG-CNN", "depth", ("filters",), 12, "mse", True, (1.0, 2.0),
+                    None, "fixed"),
+    "grconvnet": Network("grconvnet", "GR-ConvNet", "rgbd", ("channels", "dropout"), 4,
+                         "smooth_l1", "quarter", None, (0.5, 1.0), "half"),
+}
+
+
+def network_of(name) -> Network:
+    """The :class:`Network` named ``name`` (a key of :data:`NETWORKS`).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, listing the known ones.
+    """
+    if name not in NETWORKS:
+        raise ValueError(f"unknown network {name!r}: one of {', '.join(NETWORKS)}")
+    return NETWORKS[name]
+
+
 def model_paths(path) -> tuple[Path, Path]:
     """``(MODEL.pt, MODEL.json)`` of ``path`` given with or without either suffix."""
     p = Path(path)
@@ -109,8 +190,9 @@ def model_paths(path) -> tuple[Path, Path]:
 
 
 def is_ggcnn_model(path) -> bool:
-    """Whether ``path`` names a saved GG-CNN model (its JSON says ``"format": "ggcnn"``);
-    reads no weights and needs no torch."""
+    """Whether ``path`` names a saved model of this package's networks (its JSON's
+    ``format`` is a key of :data:`NETWORKS`: GG-CNN or GR-ConvNet); reads no weights and needs
+    no torch."""
     _, js = model_paths(path)
     if not js.is_file():
         return False
@@ -119,7 +201,7 @@ def is_ggcnn_model(path) -> bool:
             head = json.load(fh)
     except (OSError, ValueError):
         return False
-    return isinstance(head, dict) and head.get("format") == FORMAT
+    return isinstance(head, dict) and head.get("format") in NETWORKS
 
 
 def _sha256(path: Path) -> str:
@@ -130,19 +212,22 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def save_model(net, path, meta: dict) -> tuple[Path, Path]:
+def save_model(net, path, meta: dict, network: str = FORMAT) -> tuple[Path, Path]:
     """Write the weights (a state dict, ``MODEL.pt``) and ``MODEL.json`` (``meta`` plus the
     format, the architecture and the sha256 of the weights file). No pickled objects.
 
     Parameters
     ----------
     net : torch.nn.Module
-        From :func:`build_network`.
+        From :meth:`Network.build` (:func:`build_network` for GG-CNN).
     path : str or Path
         ``MODEL`` (suffixes optional).
     meta : dict
-        JSON-serialisable: ``filters``, ``input_size`` and the read-out options are required
-        by :func:`load_model`; training information may be added.
+        JSON-serialisable: the network's architecture fields (:attr:`Network.arch`),
+        ``input_size`` and the read-out options are required by :func:`load_model`; training
+        information may be added.
+    network : str
+        A key of :data:`NETWORKS`, written as the ``format`` field.
 
     Returns
     -------
@@ -156,37 +241,43 @@ def save_model(net, path, meta: dict) -> tuple[Path, Path]:
     state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
     torch.save(state, tmp)
     tmp.replace(pt)
-    record = {"format": FORMAT, "version": FORMAT_VERSION, **meta,
+    record = {"format": network_of(network).name, "version": FORMAT_VERSION, **meta,
               "weights": pt.name, "sha256": _sha256(pt)}
     write_text_atomic(js, json.dumps(record, indent=2))
     return pt, js
 
 
 def load_model(path, device: str = "cpu"):
-    """A saved GG-CNN: the network (eval mode, on ``device``) and its JSON record.
+    """A saved model (GG-CNN or GR-ConvNet, by its ``format``): the network (eval mode, on
+    ``device``) and its JSON record.
 
     Raises
     ------
     FileNotFoundError
         When a file is missing.
     ValueError
-        One line naming the file: not a GG-CNN model, weights not matching the recorded
-        sha256 (truncated or replaced), or weights that do not fit the architecture.
+        One line naming the file: not a model of these networks, weights not matching the
+        recorded sha256 (truncated or replaced), or weights that do not fit the architecture
+        (another network's, or another size's).
     """
     pt, js = model_paths(path)
     if not js.is_file():
         raise FileNotFoundError(f"GG-CNN model file not found: {js}")
     meta = read_json(js, "GG-CNN model")
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise ValueError(f"{js}: not a GG-CNN model (no \"format\": \"{FORMAT}\")")
+    if not isinstance(meta, dict) or meta.get("format") not in NETWORKS:
+        raise ValueError(f"{js}: not a GG-CNN model (no \"format\": \"{FORMAT}\")"
+                         if not isinstance(meta, dict) or "format" not in meta else
+                         f"{js}: not a model of {', '.join(NETWORKS)} (\"format\": "
+                         f"{meta['format']!r})")
+    spec = NETWORKS[meta["format"]]
     if meta.get("version") != FORMAT_VERSION:
-        raise ValueError(f"{js}: GG-CNN model version {meta.get('version')!r}, this toolkit "
-                         f"reads {FORMAT_VERSION}")
-    for key in ("filters", "input_size", "sha256"):
+        raise ValueError(f"{js}: {spec.title} model version {meta.get('version')!r}, this "
+                         f"toolkit reads {FORMAT_VERSION}")
+    for key in (*spec.arch, "input_size", "sha256"):
         if key not in meta:
-            raise ValueError(f"{js}: GG-CNN model record has no {key!r}")
+            raise ValueError(f"{js}: {spec.title} model record has no {key!r}")
     if not pt.is_file():
-        raise FileNotFoundError(f"GG-CNN weights file not found: {pt}")
+        raise FileNotFoundError(f"{spec.title} weights file not found: {pt}")
     if _sha256(pt) != meta["sha256"]:
         raise ValueError(f"{pt}: the weights do not match the sha256 recorded in {js.name} "
                          "(truncated or replaced file)")
@@ -197,12 +288,18 @@ def load_model(path, device: str = "cpu"):
         msg = " ".join(str(exc).split())[:200]
         raise ValueError(f"{pt}: not a readable weights file ({type(exc).__name__}: "
                          f"{msg})") from None
-    net = build_network(meta["filters"])
     try:
+        net = spec.build(meta)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{js}: bad {spec.title} architecture ({exc})") from None
+    try:
+        if not isinstance(state, dict):
+            raise TypeError(f"a {type(state).__name__}, not a state dict")
         net.load_state_dict(state)
     except Exception as exc:
         msg = " ".join(str(exc).split())[:200]
-        raise ValueError(f"{pt}: the weights do not fit GG-CNN with filters "
-                         f"{meta['filters']} ({msg})") from None
+        what = (f"GG-CNN with filters {meta['filters']}" if spec.name == FORMAT
+                else spec.describe(meta))
+        raise ValueError(f"{pt}: the weights do not fit {what} ({msg})") from None
     net.to(device).eval()
     return net, meta
