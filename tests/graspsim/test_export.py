@@ -162,10 +162,14 @@ def test_inpaint_depth_matches_the_peers_and_rejects_empty():
         inpaint_depth(np.zeros((4, 4), np.float32))
 
 
-def test_real_cornell_point_clouds_export_as_their_preprocessing(cornell_samples_root, tmp_path):
-    """Real Cornell (point clouds): the exported depth is the range in metres, inpainted."""
-    s = export_cornell(cornell_samples_root, tmp_path / "real")
-    assert s["images"] and not s["skipped"]  # real Cornell has a positive on every image
+def test_real_cornell_images_export_as_their_preprocessing(cornell_samples_root, tmp_path):
+    """The two real Cornell samples (their preprocessed TIFFs, the range in metres; their
+    rectangle files are not shared, so they count as images without a positive): left out by
+    default, named; with ``keep_empty`` the exported depth is theirs, inpainted."""
+    s = export_cornell(cornell_samples_root, tmp_path / "default")
+    assert not s["images"] and {x["image"] for x in s["skipped"]} == {"0100", "0101"}
+    s = export_cornell(cornell_samples_root, tmp_path / "real", keep_empty=True)
+    assert sorted(s["images"]) == ["0100", "0101"] and not s["skipped"]
     for sample in load_cornell(cornell_samples_root):
         got = tifffile.imread(next((tmp_path / "real").glob(f"*/pcd{sample.image_id}d.tiff")))
         np.testing.assert_allclose(got, _peer_inpaint(sample.depth), rtol=1e-6)
