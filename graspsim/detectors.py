@@ -358,51 +358,112 @@ def executable(rects, obs, table_depth=None, tolerance: float = 0.003,
     -------
     ndarray of shape (n,), bool
     """
-    from dlsr.detection import fill_unseen_surface, table_plane_mask, table_surface
-
-    from .grasp import fingers_collide, rectangle_to_grasp, settle_fingers
-    from .hands import hand_geometry
-
-    geo = hand_geometry(hand)
-
-    for key in ("depth", "K"):
-        if obs.get(key) is None:
-            raise ValueError(f"judging rectangles executable needs the observation's {key!r}")
-    if obs.get("T_world_cam") is None:  # a real image: the check is in the camera's frame
-        obs = dict(obs, T_world_cam=np.eye(4))
-    depth = np.asarray(obs["depth"], dtype=np.float32)
-    valid = np.asarray(obs.get("depth_valid", depth > 0), dtype=bool) & (depth > 0)
-    region = None
-    if table_depth is None and len(rects):
-        if unseen_surface:  # the table fitted once for both
-            region, table_depth = table_plane_mask(depth, valid, return_surface=True)
-        else:
-            table_depth = table_surface(depth, valid)
-    out = np.zeros(len(rects), dtype=bool)
-    grasps = []
-    for i, r in enumerate(rects):
-        g = rectangle_to_grasp(r, depth, valid, obs["K"], obs["T_world_cam"],
-                               max_opening=geo.max_opening, geometry=geo)
-        if min_grip is not None:
-            g = settle_fingers(g, depth, valid, obs["K"], obs["T_world_cam"], table_depth,
-                               min_grip=min_grip, geometry=geo)
-        grasps.append(g)
-        out[i] = g.failure is None and not fingers_collide(
-            g, depth, valid, obs["K"], obs["T_world_cam"], table_depth, tolerance=tolerance,
-            geometry=geo)
-    if unseen_surface and out.any():
-        if region is None:
-            region = table_plane_mask(depth, valid)
-        filled, seen = fill_unseen_surface(depth, valid, region)
-        if (seen != valid).any():
-            strict = out.copy()
-            for i in np.flatnonzero(out):
-                strict[i] = not fingers_collide(grasps[i], filled, seen, obs["K"],
-                                                obs["T_world_cam"], table_depth,
-                                                tolerance=tolerance, geometry=geo)
-            if strict.any():
-                return strict
+    judge = _Judge(rects, obs, table_depth, tolerance, unseen_surface, min_grip, hand)
+    out = np.array([judge.plain(i) for i in range(len(rects))], dtype=bool)
+    if out.any() and judge.strict_applies():
+        strict = out.copy()
+        for i in np.flatnonzero(out):
+            strict[i] = judge.strict(i)
+        if strict.any():
+            return strict
     return out
+
+
+def _first_executable(rects, obs, keep: int, tolerance: float = 0.003,
+                      unseen_surface: bool = True, min_grip: float | None = None,
+                      hand: str = "builtin") -> np.ndarray:
+    """``np.flatnonzero(executable(rects, obs, ...))[:keep]``, judging the rectangles in order
+    only until ``keep`` of them are known to pass (the gripper-aware detectors keep no more):
+    the same indices, without judging the rest of a ranking of 40."""
+    judge = _Judge(rects, obs, None, tolerance, unseen_surface, min_grip, hand)
+    plain, strict = [], []
+    for i in range(len(rects)):
+        if not judge.plain(i):
+            continue
+        plain.append(i)
+        if not judge.strict_applies():  # the fingers see no unseen surface: plain verdicts
+            if len(plain) >= keep:
+                break
+            continue
+        if judge.strict(i):
+            strict.append(i)
+            if len(strict) >= keep:  # some pass with the unseen surface: those are the verdicts
+                break
+    chosen = strict if strict else plain
+    return np.asarray(chosen[:keep], dtype=np.intp)
+
+
+class _Judge:
+    """:func:`executable`'s verdicts on one observation, one rectangle at a time: the table
+    fitted (or found in the memo) and the unseen surface filled once, when first needed."""
+
+    def __init__(self, rects, obs, table_depth, tolerance, unseen_surface, min_grip, hand):
+        from dlsr.detection import table_plane_mask, table_surface
+
+        from .hands import hand_geometry
+
+        self.geo = hand_geometry(hand)
+        for key in ("depth", "K"):
+            if obs.get(key) is None:
+                raise ValueError(f"judging rectangles executable needs the observation's "
+                                 f"{key!r}")
+        if obs.get("T_world_cam") is None:  # a real image: the check is in the camera's frame
+            obs = dict(obs, T_world_cam=np.eye(4))
+        self.rects, self.obs = rects, obs
+        self.tolerance, self.unseen_surface, self.min_grip = tolerance, unseen_surface, min_grip
+        depth = np.asarray(obs["depth"], dtype=np.float32)
+        self.depth = depth
+        self.valid = np.asarray(obs.get("depth_valid", depth > 0), dtype=bool) & (depth > 0)
+        self.region = None
+        if table_depth is None and len(rects):
+            if unseen_surface:  # the table fitted once for both
+                self.region, table_depth = table_plane_mask(depth, self.valid,
+                                                            return_surface=True)
+            else:
+                table_depth = table_surface(depth, self.valid)
+        self.table_depth = table_depth
+        self.grasps = {}
+        self._filled = None
+
+    def plain(self, i) -> bool:
+        """Whether rectangle ``i`` has a pose and its fingers meet no surface seen."""
+        from .grasp import fingers_collide, rectangle_to_grasp, settle_fingers
+
+        o, geo = self.obs, self.geo
+        g = rectangle_to_grasp(self.rects[i], self.depth, self.valid, o["K"], o["T_world_cam"],
+                               max_opening=geo.max_opening, geometry=geo)
+        if self.min_grip is not None:
+            g = settle_fingers(g, self.depth, self.valid, o["K"], o["T_world_cam"],
+                               self.table_depth, min_grip=self.min_grip, geometry=geo)
+        self.grasps[i] = g
+        return g.failure is None and not fingers_collide(
+            g, self.depth, self.valid, o["K"], o["T_world_cam"], self.table_depth,
+            tolerance=self.tolerance, geometry=geo)
+
+    def strict_applies(self) -> bool:
+        """Whether the unseen surface is checked and fills any pixel (computed on first call)."""
+        if not self.unseen_surface:
+            return False
+        if self._filled is None:
+            from dlsr.detection import fill_unseen_surface, table_plane_mask
+
+            region = self.region
+            if region is None:
+                region = table_plane_mask(self.depth, self.valid)
+            filled, seen = fill_unseen_surface(self.depth, self.valid, region)
+            self._filled = (filled, seen, bool((seen != self.valid).any()))
+        return self._filled[2]
+
+    def strict(self, i) -> bool:
+        """Whether rectangle ``i``'s fingers (judged by :meth:`plain` first) also miss the
+        unseen surface."""
+        from .grasp import fingers_collide
+
+        filled, seen, _ = self._filled
+        o = self.obs
+        return not fingers_collide(self.grasps[i], filled, seen, o["K"], o["T_world_cam"],
+                                   self.table_depth, tolerance=self.tolerance,
+                                   geometry=self.geo)
 
 
 class GripperAwareDetector:
@@ -451,10 +512,10 @@ class GripperAwareDetector:
         rects, _ = check_detections(self.detector.predict(obs), type(self.detector).__name__)
         if not rects:
             return []
-        ok = executable(rects, obs, tolerance=self.tolerance,
-                        unseen_surface=self.unseen_surface, min_grip=self.min_grip,
-                        hand=getattr(self, "hand", "builtin"))
-        return [r for r, k in zip(rects, ok, strict=True) if k][: self.keep]
+        keep = _first_executable(rects, obs, self.keep, tolerance=self.tolerance,
+                                 unseen_surface=self.unseen_surface, min_grip=self.min_grip,
+                                 hand=getattr(self, "hand", "builtin"))
+        return [rects[i] for i in keep]
 
     def detect(self, obs):
         """The wrapped DLSR detector's :class:`dlsr.detection.Detection`, keeping the
@@ -469,10 +530,9 @@ class GripperAwareDetector:
             return det
         from dlsr.rectangles import array_to_rects
 
-        ok = executable(array_to_rects(det.rects), obs, tolerance=self.tolerance,
-                        unseen_surface=self.unseen_surface, min_grip=self.min_grip,
-                        hand=getattr(self, "hand", "builtin"))
-        keep = np.flatnonzero(ok)[: self.keep]
+        keep = _first_executable(array_to_rects(det.rects), obs, self.keep,
+                                 tolerance=self.tolerance, unseen_surface=self.unseen_surface,
+                                 min_grip=self.min_grip, hand=getattr(self, "hand", "builtin"))
         reason = None if len(keep) else (f"none of the {len(det.rects)} best rectangles is "
                                          "executable by this gripper")
         return dataclasses.replace(det, rects=det.rects[keep], scores=det.scores[keep],

@@ -39,6 +39,11 @@ def _pct(x, digits=1):
     return "n/a" if x is None else f"{100 * x:.{digits}f} %"
 
 
+def _seconds(x) -> str:
+    """Seconds with three decimals, ``n/a`` when not recorded."""
+    return "n/a" if x is None else f"{x:.3f}"
+
+
 def _ci(c):
     return "" if not c else f"[{100 * c[0]:.1f}, {100 * c[1]:.1f}]"
 
@@ -537,15 +542,18 @@ def write_report(root, config, stages: dict, wall: float | None = None) -> Path:
         s = stages.get(f"trials/{name}")
         if not s:
             continue
+        plan = s.get("planning_seconds") or {}
         rows.append([name, f"{s['successes']}/{s['n']}", _pct(s["success_rate"]),
                      _ci(s["success_ci95"]), _pct(s.get("graspable_success_rate")),
-                     _pct(s.get("metric_accuracy")), _pct(s.get("agreement"))])
+                     _pct(s.get("metric_accuracy")), _pct(s.get("agreement")),
+                     _seconds(plan.get("median")), _seconds(plan.get("p95"))])
         t = s["verdict_vs_outcome"]
         tables.append([name, t["metric_true"]["success"], t["metric_true"]["failure"],
                        t["metric_false"]["success"], t["metric_false"]["failure"]])
     blocks.append(("table", ["detector", "successes", "success rate", "95 % CI (Wilson)",
                              "on graspable objects", "rectangle metric says correct",
-                             "metric agrees with physics"], rows))
+                             "metric agrees with physics", "plan time median (s)",
+                             "plan time p95 (s)"], rows))
     summaries = {n: stages[f"trials/{n}"] for n in names if stages.get(f"trials/{n}")}
     if summaries:
         _picture(blocks, plot_success_rates, (summaries,), pics / "success_rates.png", root,

@@ -191,16 +191,44 @@ class _PatchScorer:
         return S
 
     def _triangle_masked(self, img, msk, rows, cols, mean, inv, full):
+        X = self._gather(img, msk, rows, cols, mean, inv, full)
+        if not self.whiten:
+            return self._triangle_whitened(X)
+        M = self._masks(msk, rows, cols)
+        blank = ~M.any(axis=1)
+        if not blank.any():
+            return self._triangle_whitened(X, M)
+        # a patch with every entry masked (the padding of a crop narrower than it is wide, a
+        # quarter of a lattice's patches) is 0 after masking, whatever the product: its code
+        # is the all-masked patch's, computed once
+        S = np.empty((len(rows), self.V.shape[1]), np.float32)
+        S[blank] = self._blank_scores()
+        live = ~blank
+        if live.any():
+            S[live] = self._triangle_whitened(X[live], M[live])
+        return S
+
+    def _triangle_whitened(self, X, M=None):
+        """Scores of gathered patches ``X`` with masked entries: whitened, re-masked by ``M``
+        (with whitening), multiplied by the centroids."""
         from .. import _dense
 
-        X = self._gather(img, msk, rows, cols, mean, inv, full)
         if self.whiten:
             X = X @ self.P
             X -= self.mP
-            X *= self._masks(msk, rows, cols)
-        S = np.empty((len(rows), self.V.shape[1]), np.float32)
+            X *= M
+        S = np.empty((len(X), self.V.shape[1]), np.float32)
         _dense.triangle_scores(X, 0, X @ self.CT, 0, self.zero, self.cc, self.VT, S)
         return S
+
+    def _blank_scores(self):
+        """The scores of a patch whose every entry is masked (as :meth:`_triangle_masked`
+        computes them: the whitened patch re-masked is 0)."""
+        if not hasattr(self, "_blank"):
+            p = self.p
+            self._blank = self._triangle_whitened(np.zeros((1, p), np.float32),
+                                                  np.zeros((1, p), np.float32))[0]
+        return self._blank
 
     def _generic(self, img, msk, rows, cols, mean, inv, full):
         X = self._gather(img, msk, rows, cols, mean, inv, full)

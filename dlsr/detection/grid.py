@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .. import _threads
 from ..rectangles import corners_from_array, normalize_angle
 
 
@@ -318,15 +319,20 @@ _REGIONS = _Memo(1024)
 
 
 def _content_key(depth, depth_valid) -> bytes:
-    """A digest of the depth image and its validity mask, exactly as given."""
+    """A digest of what a table fit reads of a depth image: its valid pixels
+    (:func:`valid_depth`) and their depth in float64.
+
+    Two ways of passing the same image (float32 or float64 depth, a validity mask of uint8 or
+    bool, or none where the missing depth is already 0) get the same key, so that the detector,
+    its physical term and the gripper-aware check (which passes a bool mask) share one fit; the
+    fit reads nothing else (:func:`_fit_table`), so the memo still changes no result.
+    """
+    depth = np.asarray(depth)
+    valid = valid_depth(depth, depth_valid)
     h = hashlib.blake2b(digest_size=16)
-    for a in (depth, depth_valid):
-        if a is None:
-            h.update(b"none")
-            continue
-        a = np.ascontiguousarray(a)
-        h.update(f"{a.dtype.str}{a.shape}".encode())
-        h.update(a.reshape(-1).view(np.uint8))
+    h.update(f"{depth.shape}".encode())
+    h.update(np.packbits(valid.reshape(-1)).tobytes())
+    h.update(np.where(valid, depth.astype(np.float64), 0.0).reshape(-1).view(np.uint8))
     return h.digest()
 
 
@@ -349,10 +355,15 @@ def _fit_table(depth, depth_valid, stride, n_iter, tol, random_state, degree, ba
         return depth, valid, None
     filled = np.where(valid, depth, 1.0)
     known = None if key is None else _TABLE_FITS.get(key)
-    if known is not None:
-        C, sigma = known
-        return depth, valid, None if C is None else _table_from(filled, valid, C, sigma, tol)
-    fit = _table_surface(filled, valid, degree, stride, n_iter, tol, band, random_state)
+    # BLAS on one thread: the fit's products and least squares are small (under 20,000 x 10),
+    # and a threaded BLAS waits for its pool on a busy machine (a fit took 0.3 s instead of
+    # 0.03 s with 2 cores shared)
+    with _threads.limit(1, user_api="blas"):
+        if known is not None:
+            C, sigma = known
+            return depth, valid, None if C is None else _table_from(filled, valid, C, sigma,
+                                                                    tol)
+        fit = _table_surface(filled, valid, degree, stride, n_iter, tol, band, random_state)
     if key is not None:
         _TABLE_FITS.put(key, (None, None) if fit is None else (fit[3].copy(), fit[2]))
     return depth, valid, fit
@@ -442,7 +453,7 @@ def _standing_object(depth, valid, surface, table, sigma, min_height, min_area) 
     """:func:`table_plane_mask`'s object region, given the fitted table."""
     H, W = depth.shape
     empty = np.zeros((H, W), dtype=bool)
-    hull = cv2.convexHull(np.argwhere(table)[:, ::-1].astype(np.int32))
+    hull = cv2.convexHull(_row_ends(table))
     on_table = np.zeros((H, W), np.uint8)
     cv2.fillConvexPoly(on_table, hull, 1)
     on_table = on_table.astype(bool)
@@ -477,6 +488,23 @@ def _standing_object(depth, valid, surface, table, sigma, min_height, min_area) 
     return _fill_holes(region.astype(bool) & comp)
 
 
+def _row_ends(mask) -> np.ndarray:
+    """The first and last pixel of each row of ``mask``, ``(n, 2)`` int32 ``(x, y)`` points.
+
+    The convex hull of a mask's pixels is that of its rows' end points (every other pixel lies
+    between the two ends of its row), a few hundred points instead of up to the whole image's;
+    ``cv2.convexHull`` of either returns the same polygon (tests check it).
+    """
+    rows = np.flatnonzero(mask.any(axis=1))
+    if not len(rows):
+        return np.zeros((0, 2), np.int32)
+    sub = mask[rows]
+    first = np.argmax(sub, axis=1)
+    last = sub.shape[1] - 1 - np.argmax(sub[:, ::-1], axis=1)
+    return np.concatenate([np.column_stack([first, rows]),
+                           np.column_stack([last, rows])]).astype(np.int32)
+
+
 def complete_region(region, valid) -> np.ndarray:
     """The object region with the missing depth inside its convex hull added.
 
@@ -506,7 +534,7 @@ def complete_region(region, valid) -> np.ndarray:
     if not region.any():
         return region
     hull = np.zeros(region.shape, np.uint8)
-    cv2.fillConvexPoly(hull, cv2.convexHull(np.argwhere(region)[:, ::-1].astype(np.int32)), 1)
+    cv2.fillConvexPoly(hull, cv2.convexHull(_row_ends(region)), 1)
     return region | (hull.astype(bool) & ~valid)
 
 

@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from ..datasets import check_camera_matrix
-from ..rectangles import GraspRectangle
+from ..rectangles import GraspRectangle, normalize_angle
 from .exact import Detection, _check_obs, _empty, _observed_region
 from .grid import _nearest_fill, complete_region, table_surface
 from .model import PATCHES_PER_RECTANGLE
@@ -168,6 +168,24 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
         With ``max_opening``, when ``intrinsics`` is not a valid camera matrix (as
         :func:`max_width_px`), even for an empty mask.
     """
+    arr, keys = _lattice_array(mask, depth, intrinsics, offset, max_opening, jaw_px, spacing,
+                               n_angles, margin_px, depth_band, reach, seen, widest_in_reach,
+                               normalized=False)
+    return [GraspRectangle(*row) for row in arr.tolist()]
+
+
+def _lattice_array(mask, depth, intrinsics, offset, max_opening, jaw_px=(10.0, 28.0),
+                   spacing=None, n_angles=12, margin_px=4.0, depth_band=0.02, reach=0.95,
+                   seen=None, widest_in_reach=False, normalized=True):
+    """:func:`lattice_candidates` as an ``(n, 5)`` array, and the candidates' keys.
+
+    Every lattice point's chords in every direction are followed at once, and the candidates
+    (point, direction, run, opening, jaw, in that order) are made as arrays with the same
+    floating-point operations, in the same order, as one rectangle at a time; the first of
+    those sharing a key (centre rounded to the pixel, direction, half opening rounded, jaw) is
+    kept. ``normalized``: the angle column as :class:`~dlsr.rectangles.GraspRectangle` stores
+    it (wrapped once more into ``[-pi/2, pi/2)``), else the lattice's own angles.
+    """
     jaws, step = lattice_step(jaw_px, spacing)
     if n_angles < 1:
         raise ValueError(f"n_angles must be >= 1, got {n_angles}")
@@ -175,9 +193,9 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
     seen = set() if seen is None else seen
     full = np.asarray(mask, dtype=bool)
     depth = np.asarray(depth, dtype=float)
-    out: list[GraspRectangle] = []
+    empty = np.zeros((0, 5))
     if full.sum() < 5:
-        return out
+        return empty, []
     H, W = full.shape
     thetas = -np.pi / 2 + np.pi * np.arange(n_angles) / n_angles
     ys, xs = np.nonzero(full)
@@ -193,37 +211,102 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
     ix, iy = np.rint(px).astype(int), np.rint(py).astype(int)
     ok = (ix >= 0) & (ix < w_) & (iy >= 0) & (iy < h_)
     ok[ok] = mask[iy[ok], ix[ok]] & (dep[iy[ok], ix[ok]] > 0)
-    for x, y, i, j in zip(px[ok], py[ok], ix[ok], iy[ok], strict=True):
-        pt = np.array([x, y])
-        zc = dep[j, i]
-        near = mask & (dep > 0) & (dep < zc + depth_band)
-        runs_mask = np.column_stack(chords(mask, pt, thetas))
-        runs_near = np.column_stack(chords(near, pt, thetas))
-        for k, th in enumerate(thetas):
-            u = np.array([np.cos(th), -np.sin(th)])
-            runs = {tuple(runs_mask[k]), tuple(runs_near[k])}
-            for lo, hi in sorted(runs):
-                length = hi - lo
-                c = pt + 0.5 * (lo + hi) * u
-                ci = int(np.clip(np.rint(c[0]), 0, w_ - 1))
-                cj = int(np.clip(np.rint(c[1]), 0, h_ - 1))
-                z = dep[cj, ci] if dep[cj, ci] > 0 else zc
-                c = c + (x0, y0)
-                w_max = (np.inf if max_opening is None else
-                         reach * float(_max_width_px(z, th, K, max_opening)))
-                widths = [length + margin_px, 1.3 * length + 2 * margin_px]
-                if widest_in_reach and widths[0] <= w_max < widths[1]:
-                    widths[1] = w_max
-                for w in widths:
-                    if w > w_max:
-                        continue
-                    for h in jaws:
-                        key = (round(c[0]), round(c[1]), k, round(w / 2), h)
-                        if key in seen:
-                            continue
-                        seen.add(key)
-                        out.append(GraspRectangle(float(c[0]), float(c[1]), float(th),
-                                                  float(w), float(h)))
+    px, py, ix, iy = px[ok], py[ok], ix[ok], iy[ok]
+    if not len(px):
+        return empty, []
+    zc = dep[iy, ix]
+    # the directions as the one-point code computes them: scalar cos/sin per angle
+    u_pt = np.array([[np.cos(th), -np.sin(th)] for th in thetas])
+    scale = (None if K is None else
+             np.array([np.hypot(np.cos(th) / K[0, 0], np.sin(th) / K[1, 1]) for th in thetas]))
+    lo_m, hi_m, lo_n, hi_n = _runs(mask, dep, np.column_stack([px, py]), zc, thetas,
+                                   depth_band)
+    # (point, angle, run): the runs of the mask and of the surface near the point's depth,
+    # in sorted order, the second dropped when both are the same
+    same = (lo_m == lo_n) & (hi_m == hi_n)
+    first_m = (lo_m < lo_n) | ((lo_m == lo_n) & (hi_m <= hi_n))
+    lo = np.stack([np.where(first_m, lo_m, lo_n), np.where(first_m, lo_n, lo_m)], axis=2)
+    hi = np.stack([np.where(first_m, hi_m, hi_n), np.where(first_m, hi_n, hi_m)], axis=2)
+    run_ok = np.stack([np.ones_like(same), ~same], axis=2)
+    P, A = len(px), len(thetas)
+    k = np.broadcast_to(np.arange(A)[None, :, None], lo.shape)
+    length = hi - lo
+    mid = 0.5 * (lo + hi)
+    cx = px[:, None, None] + mid * u_pt[k, 0]
+    cy = py[:, None, None] + mid * u_pt[k, 1]
+    ci = np.clip(np.rint(cx), 0, w_ - 1).astype(int)
+    cj = np.clip(np.rint(cy), 0, h_ - 1).astype(int)
+    zd = dep[cj, ci]
+    z = np.where(zd > 0, zd, np.broadcast_to(zc[:, None, None], zd.shape))
+    cx = cx + x0
+    cy = cy + y0
+    if max_opening is None:
+        w_max = np.full(lo.shape, np.inf)
+    else:
+        w_max = reach * (max_opening / (z * scale[k]))
+    w_tight = length + margin_px
+    w_wide = 1.3 * length + 2 * margin_px
+    if widest_in_reach:
+        w_wide = np.where((w_tight <= w_max) & (w_max < w_wide), w_max, w_wide)
+    widths = np.stack([w_tight, w_wide], axis=3)  # (P, A, 2 runs, 2 widths)
+    keep = run_ok[..., None] & ~(widths > w_max[..., None])
+    n_j = len(jaws)
+    shape = (P, A, 2, 2, n_j)
+    keep = np.broadcast_to(keep[..., None], shape).ravel()
+    W_ = np.broadcast_to(widths[..., None], shape).ravel()[keep]
+    X = np.broadcast_to(cx[..., None, None], shape).ravel()[keep]
+    Y = np.broadcast_to(cy[..., None, None], shape).ravel()[keep]
+    Kk = np.broadcast_to(k[..., None, None], shape).ravel()[keep]
+    J = np.broadcast_to(np.arange(n_j), shape).ravel()[keep]
+    jaw = np.asarray(jaws, dtype=float)
+    # the first candidate of each key, in the order made
+    ikey = np.column_stack([np.rint(X), np.rint(Y), Kk, np.rint(W_ / 2), J]).astype(np.int64)
+    _, first = np.unique(ikey, axis=0, return_index=True)
+    first = np.sort(first)
+    out_keys = []
+    chosen = []
+    for i in first.tolist():
+        key = (int(ikey[i, 0]), int(ikey[i, 1]), int(ikey[i, 2]), int(ikey[i, 3]),
+               jaws[int(ikey[i, 4])])
+        if key in seen:
+            continue
+        seen.add(key)
+        out_keys.append(key)
+        chosen.append(i)
+    chosen = np.asarray(chosen, dtype=np.intp)
+    th = normalize_angle(thetas) if normalized else thetas
+    arr = np.column_stack([X[chosen], Y[chosen], th[Kk[chosen]], W_[chosen],
+                           jaw[J[chosen]]]).reshape(-1, 5)
+    return arr, out_keys
+
+
+def _runs(mask, dep, centres, zc, thetas, depth_band, max_px: float = 120.0, block: int = 128):
+    """:func:`chords` of every lattice point at once, on the mask and on the surface no deeper
+    than ``depth_band`` beyond the point's depth ``zc``: ``lo_m, hi_m, lo_n, hi_n`` of shape
+    ``(n_points, n_angles)``; the same pixels and arithmetic as :func:`chords` point by point."""
+    H, W = mask.shape
+    thetas = np.asarray(thetas, dtype=float)
+    u = np.column_stack([np.cos(thetas), -np.sin(thetas)])
+    t = np.arange(0.0, max_px + 1.0)
+    n = len(centres)
+    out = [np.empty((n, len(thetas))) for _ in range(4)]
+    for s0 in range(0, n, block):
+        c = np.asarray(centres[s0:s0 + block], float)
+        z = zc[s0:s0 + block]
+        for sgn, (i_m, i_n) in ((1.0, (1, 3)), (-1.0, (0, 2))):
+            pts = np.rint(c[:, None, None, :]
+                          + (sgn * t[None, :, None] * u[:, None, :])[None]).astype(int)
+            ok = ((pts[..., 0] >= 0) & (pts[..., 0] < W) & (pts[..., 1] >= 0)
+                  & (pts[..., 1] < H))
+            r, q = pts[..., 1][ok], pts[..., 0][ok]
+            on = np.zeros(ok.shape, dtype=bool)
+            on[ok] = mask[r, q]
+            d = np.zeros(ok.shape)
+            d[ok] = dep[r, q]
+            near = on & (d > 0) & (d < np.broadcast_to(z[:, None, None], d.shape) + depth_band)
+            for run, idx in ((on, i_m), (near, i_n)):
+                stop = np.where(run.all(axis=2), len(t), np.argmin(run, axis=2))
+                out[idx][s0:s0 + block] = np.maximum(stop - 1, 0) * sgn
     return out
 
 
@@ -328,11 +411,9 @@ class LatticeDetector:
         dep = np.where(valid, depth, 0.0)
         if self.fill_holes:
             dep = _fill_region_holes(dep, valid, laid)
-        rects = lattice_candidates(laid, dep, obs.get("K"), offset,
-                                   self.max_width, self.jaw_px, self.spacing, self.n_angles,
-                                   self.margin_px, self.depth_band, self.reach,
-                                   widest_in_reach=self.widest_in_reach)
-        cand = np.array([r.as_array() for r in rects], dtype=float).reshape(-1, 5)
+        cand, _ = _lattice_array(laid, dep, obs.get("K"), offset, self.max_width, self.jaw_px,
+                                 self.spacing, self.n_angles, self.margin_px, self.depth_band,
+                                 self.reach, widest_in_reach=self.widest_in_reach)
         if self.budget is not None and len(cand) > self.budget:
             cand = cand[np.sort(rng.choice(len(cand), size=int(self.budget), replace=False))]
         if not len(cand):

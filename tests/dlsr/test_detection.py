@@ -576,3 +576,35 @@ def test_table_fits_are_memoised_by_content_and_change_no_result():
     grid._REGIONS.clear()
     r4, s4 = table_plane_mask(depth, valid, return_surface=True)
     assert np.array_equal(r4, r1) and s4.tobytes() == s1.tobytes()
+
+
+def test_patches_with_every_entry_masked_score_as_the_all_masked_patch():
+    """The scorer gives a crop's padding (every entry masked) the all-masked patch's scores
+    without encoding it: what encoding each of them gives."""
+    from dlsr import _dense
+
+    obs = _scene()
+    model = _random_model(obs)
+    rng = np.random.default_rng(4)
+    img = rng.normal(size=(40, 24, 8)).astype(np.float32)
+    msk = np.ones(img.shape, bool)
+    msk[:9] = False  # padding rows above a crop's content
+    msk[30:] = False  # and below
+    msk[15:19, 5:11, 4:] = False  # a depth hole
+    img *= msk
+    V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
+    scorer = _PatchScorer(model, V)
+    Hp, Wp = img.shape[0] - 5, img.shape[1] - 5
+    mean = np.empty((Hp, Wp, 4), np.float32)
+    inv = np.empty((Hp, Wp, 4), np.float32)
+    full = np.empty((Hp, Wp), bool)
+    _dense.window_stats(img, msk, 1e-4, mean, inv, full)
+    rows, cols = np.divmod(np.arange(Hp * Wp), Wp)
+    S = scorer.scores(img, msk, rows, cols, mean, inv, full)
+    bad = ~full[rows, cols]
+    X = scorer._gather(img, msk, rows[bad], cols[bad], mean, inv, full)
+    ref = scorer._triangle_whitened(X, scorer._masks(msk, rows[bad], cols[bad]))
+    blank = rows[bad] + 5 < 9
+    assert blank.sum() >= 3 * Wp and (~blank).sum() > 100
+    np.testing.assert_array_equal(S[bad][blank], ref[blank])
+    np.testing.assert_allclose(S[bad], ref, rtol=1e-5, atol=1e-5 * np.abs(ref).max())

@@ -303,8 +303,9 @@ def test_report_html_renders_in_headless_chromium(tiny_run, tmp_path):
     assert img.std() > 10  # text, tables and pictures, not a blank page
 
 
-def _synthetic_trials(root, name, success_of):
-    """A trial folder as run_trials writes it, 40 trials on 4 objects; returns its summary."""
+def _synthetic_trials(root, name, success_of, planning=None):
+    """A trial folder as run_trials writes it, 40 trials on 4 objects; returns its summary
+    (``planning(i)``: trial i's planning seconds, not recorded when None)."""
     from graspsim.trials import summarize
 
     folder = root / "trials" / name
@@ -320,6 +321,8 @@ def _synthetic_trials(root, name, success_of):
                         "graspable": objects[i % 4] != "plate", "success": ok,
                         "reason": None if ok else "slipped", "rectangle": None,
                         "metric": i % 3 == 0, "seconds": 0.1})
+        if planning is not None:
+            records[-1]["planning_seconds"] = planning(i)
     (folder / "trials.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     return summarize(records) | {"seconds": 4.0}
 
@@ -366,6 +369,22 @@ def test_report_says_why_a_pair_was_not_compared(tmp_path):
     md = write_report(tmp_path, config, stages).read_text()
     assert "dlsr against mask-pca: not compared" in md and "seed 7 vs 8" in md
     assert (tmp_path / "pictures" / "success_rates.png").exists()
+
+
+def test_report_gives_each_detectors_plan_time(tmp_path):
+    from graspsim.report import write_report
+
+    config = pipeline.load_config(**{**TINY, "baselines": ["mask-pca"]})
+    stages = {"trials/dlsr": _synthetic_trials(tmp_path, "dlsr", lambda i: i % 2 == 0,
+                                               planning=lambda i: 0.1 + 0.01 * i),
+              "trials/mask-pca": _synthetic_trials(tmp_path, "mask-pca", lambda i: i % 3 == 0)}
+    md = write_report(tmp_path, config, stages).read_text()
+    assert "| plan time median (s) | plan time p95 (s) |" in md
+    x = 0.1 + 0.01 * np.arange(40)
+    row = next(ln for ln in md.splitlines() if ln.startswith("| dlsr | 20/40 |"))
+    assert row.endswith(f"| {np.median(x):.3f} | {np.percentile(x, 95):.3f} |")
+    row = next(ln for ln in md.splitlines() if ln.startswith("| mask-pca | 14/40 |"))
+    assert row.endswith("| n/a | n/a |")  # trials that recorded no planning time
 
 
 @pytest.mark.parametrize("name", ["full.toml", "trials500.toml"])

@@ -1,0 +1,200 @@
+"""Plan time of each detector of ``graspsim run``'s trials (one JSON object on stdout).
+
+The detectors are built as the trial stage builds them from a run configuration's defaults
+(:class:`graspsim.pipeline.RunConfig`): ``dlsr`` (the lattice detector made aware of the hand,
+with the model's physical term), ``dlsr-paper`` (the paper's dense grid search), ``mask-pca``
+and, when torch is importable and a model is given, GG-CNN. Each plans on the observations of
+the first ``--scenes`` test scenes of ``--seed`` (the trials' own scenes and camera), each
+detector in its own process (none finds another's table fits in the memo); the plan time of a
+scene is the wall time of ``predict`` (what the trial records as ``planning_seconds``), the
+median over ``--rounds`` rounds, after one call on the next scene to warm up; the median and
+95th percentile are over the scenes.
+
+The reference: ``--reference DIR``, a checkout of the code before the change (e.g. ``git
+worktree add /tmp/base <commit>``). This script then runs a worker process on that code
+(``PYTHONPATH=DIR``) beside one on this checkout, round after round in turn, so that both see
+the same load, on the same observations (written once to a temporary file); it reports the
+reference's DLSR plan times beside the new ones, and whether both propose the same rectangles
+in the same order on every scene (``identical_proposals``; ``max_score_difference``: of the
+scores of the proposed rectangles).
+
+Usage: python scripts/bench_plan.py [--scenes 20] [--seed 0] [--rounds 3]
+       [--model results/ggcnn-curve/models/dlsr_300]
+       [--ggcnn results/ggcnn-curve/models/ggcnn_300.pt] [--hand builtin]
+       [--reference /tmp/base] [--detectors dlsr,dlsr-paper,mask-pca,ggcnn]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+KEYS = ("rgb", "depth", "depth_valid", "K", "T_world_cam", "seed")
+
+
+def observations(n, seed, path):
+    """The first ``n`` test scenes' observations of ``seed``, written to ``path`` (npz)."""
+    from graspsim.sim import Simulation
+    from graspsim.trials import observation, observe_scene, resolve_objects
+
+    sim = Simulation()
+    arrays = {}
+    try:
+        specs = resolve_objects("test")
+        for i in range(n):
+            _, _, frame, _ = observe_scene(sim, specs, seed, i)
+            for k, v in observation(frame, 0).items():
+                arrays[f"{i}/{k}"] = np.asarray(v)
+    finally:
+        sim.close()
+    np.savez(path, **arrays)
+
+
+def _load(path):
+    d = np.load(path)
+    n = len({k.split("/")[0] for k in d.files})
+    out = []
+    for i in range(n):
+        o = {k: d[f"{i}/{k}"] for k in KEYS}
+        o["seed"] = int(o["seed"])
+        out.append(o)
+    return out
+
+
+def _detectors(names, model, ggcnn, hand):
+    """The trial stage's detectors (``graspsim run``'s defaults), by name."""
+    from dlsr.detection import DLSRDetector
+    from graspsim.detector_options import DetectorOptions, build_real_detector
+    from graspsim.detectors import load_detector
+    from graspsim.pipeline import RunConfig
+
+    config = RunConfig()
+    out = {}
+    for name in names:
+        if name == "dlsr":
+            opts = DetectorOptions(detector=config.detector,
+                                   complete_region=config.complete_region,
+                                   physical=config.physical, gripper_aware=config.gripper_aware,
+                                   clear_jaws=config.clear_jaws)
+            out[name] = build_real_detector(DLSRDetector.load(model), opts,
+                                            rescore=config.rescore,
+                                            coarse_to_fine=config.coarse_to_fine, hand=hand)
+        elif name == "dlsr-paper":
+            paper = Path(model).with_name(Path(model).name.replace("dlsr", "dlsr-paper"))
+            out[name] = DLSRDetector.load(paper).detector(
+                "dense", coarse_to_fine=config.coarse_to_fine, rescore=config.rescore)
+        elif name == "ggcnn":
+            try:
+                import torch  # noqa: F401
+            except ImportError:
+                continue
+            if ggcnn and Path(ggcnn).exists():
+                out[name] = load_detector(ggcnn)
+        else:
+            out[name] = load_detector(name)
+    return out
+
+
+def worker(obs_path, names, model, ggcnn, hand):
+    """Plan every scene once with each detector: seconds, and DLSR's proposals and scores."""
+    obs = _load(obs_path)
+    dets = _detectors(names, model, ggcnn, hand)
+    out = {}
+    for name, det in dets.items():
+        det.predict(obs[-1])  # warm up (compiled kernels, model files) on a scene not timed
+        seconds, rects, scores = [], [], []
+        for o in obs[:-1]:
+            t0 = time.perf_counter()
+            det.predict(o)
+            seconds.append(time.perf_counter() - t0)
+            if name == "dlsr":
+                d = det.detect(o)
+                rects.append(np.asarray(d.rects).tolist())
+                scores.append(np.asarray(d.scores).tolist())
+        out[name] = {"seconds": seconds}
+        if name == "dlsr":
+            out[name].update(rects=rects, scores=scores)
+    return out
+
+
+def _run_worker(obs_path, names, args, pythonpath=None):
+    env = dict(os.environ)
+    if pythonpath is not None:
+        env["PYTHONPATH"] = str(pythonpath)
+    cmd = [sys.executable, __file__, "--worker", str(obs_path), "--detectors", ",".join(names),
+           "--model", str(args.model), "--ggcnn", str(args.ggcnn or ""), "--hand", args.hand]
+    res = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+    if res.returncode:
+        raise RuntimeError(f"worker failed ({pythonpath or 'this checkout'}): "
+                           f"{res.stderr.strip().splitlines()[-1:]}")
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def _stats(per_round):
+    """Median and 95th percentile over scenes of each scene's median over rounds."""
+    x = np.median(np.asarray(per_round, dtype=float), axis=0)
+    return {"median": float(np.median(x)), "p95": float(np.percentile(x, 95)),
+            "n_scenes": int(len(x)), "n_rounds": len(per_round)}
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--scenes", type=int, default=20)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--model", default=str(ROOT / "results/ggcnn-curve/models/dlsr_300"))
+    p.add_argument("--ggcnn", default=str(ROOT / "results/ggcnn-curve/models/ggcnn_300.pt"))
+    p.add_argument("--hand", default="builtin")
+    p.add_argument("--reference", default=None,
+                   help="a checkout of the code before the change, timed beside this one")
+    p.add_argument("--detectors", default="dlsr,dlsr-paper,mask-pca,ggcnn")
+    p.add_argument("--worker", default=None, help=argparse.SUPPRESS)
+    args = p.parse_args(argv)
+    names = args.detectors.split(",")
+    if args.worker:
+        print(json.dumps(worker(args.worker, names, args.model, args.ggcnn or None, args.hand)))
+        return
+    load_before = list(os.getloadavg())
+    with tempfile.TemporaryDirectory() as tmp:
+        obs_path = Path(tmp) / "obs.npz"
+        observations(args.scenes + 1, args.seed, obs_path)
+        new, ref = [], []
+        for _ in range(args.rounds):  # in turn, so that both see the same load
+            # one process per detector: none finds another's table fits in the memo
+            new.append({k: v for name in names
+                        for k, v in _run_worker(obs_path, [name], args).items()})
+            if args.reference:
+                ref.append(_run_worker(obs_path, ["dlsr"], args, pythonpath=args.reference))
+    out = {"scenes": args.scenes, "seed": args.seed, "hand": args.hand,
+           "cpus": len(os.sched_getaffinity(0)),
+           "load_average": {"start": load_before, "end": list(os.getloadavg())},
+           "plan_seconds": {}}
+    for name in new[0]:
+        out["plan_seconds"][name] = _stats([r[name]["seconds"] for r in new])
+    if ref:
+        out["plan_seconds"]["dlsr (reference)"] = _stats([r["dlsr"]["seconds"] for r in ref])
+        same = [a == b for a, b in zip(new[0]["dlsr"]["rects"], ref[0]["dlsr"]["rects"],
+                                       strict=True)]
+        diffs = [float(np.max(np.abs(np.subtract(a, b)))) if len(a) and len(a) == len(b)
+                 else 0.0 for a, b in zip(new[0]["dlsr"]["scores"], ref[0]["dlsr"]["scores"],
+                                          strict=True)]
+        stable = all(r["dlsr"]["rects"] == new[0]["dlsr"]["rects"] for r in new + ref)
+        out["identical_proposals"] = {"scenes": len(same), "identical": int(sum(same)),
+                                      "same_every_round": stable,
+                                      "max_score_difference": max(diffs, default=0.0)}
+        out["speedup_median"] = (out["plan_seconds"]["dlsr (reference)"]["median"]
+                                 / out["plan_seconds"]["dlsr"]["median"])
+    print(json.dumps(out, indent=2))
+
+
+if __name__ == "__main__":
+    main()
