@@ -73,7 +73,11 @@ def test_the_skipped_objects_are_those_too_large_and_the_density_is_the_median()
     ratios = []
     for e in entries:
         mesh = trimesh.load_mesh(ycb.ycb_mesh_path(e.name))
-        assert ycb.too_large(mesh.vertices) == e.skip, e.name
+        reason = ycb.too_large(mesh.vertices)
+        if reason is not None:
+            assert e.skip == reason, e.name
+        else:  # a mesh the scan spoiled is listed by hand, with its reason
+            assert e.skip is None or e.skip.startswith("degenerate mesh: "), e.name
         if e.mass is not None and mesh.is_watertight and mesh.volume > 0:
             ratios.append(e.mass / mesh.volume)
     assert 0 < sum(e.skip is not None for e in entries) < 10
