@@ -400,18 +400,22 @@ def prepare_ycb_object(entry: YCBEntry, density: float, params: dict | None = No
         tmp = meta_path.with_suffix(".tmp")
         tmp.write_text(json.dumps(meta, indent=1))
         tmp.replace(meta_path)
+    # The mass follows the catalogue (a corrected mass needs no new decomposition); the
+    # moments of the same solid scale with it.
+    mass = float(entry.mass) if entry.mass is not None else round(
+        density * meta["volume_m3"], 4)
+    moments = np.asarray(meta["moments"], dtype=float) * (mass / meta["mass"])
     rgba = _category_rgba(entry.category)
     urdf = folder / f"{entry.name}.urdf"
     text = _URDF.format(
         marker=_MARKER, name=entry.name, friction=_FRICTION, com=_fmt(meta["com"]),
-        mass=f"{meta['mass']:.6g}",
-        i0=f"{meta['moments'][0]:.6g}", i1=f"{meta['moments'][1]:.6g}",
-        i2=f"{meta['moments'][2]:.6g}", shift=_fmt(-np.asarray(meta["centre"])),
+        mass=f"{mass:.6g}", i0=f"{moments[0]:.6g}", i1=f"{moments[1]:.6g}",
+        i2=f"{moments[2]:.6g}", shift=_fmt(-np.asarray(meta["centre"])),
         stl=stl.resolve(), rgba=_fmt(rgba))
     if not urdf.is_file() or urdf.read_text() != text:  # the STL's path can move
         urdf.write_text(text)
     return ObjectSpec(
-        name=entry.name, urdf=urdf, split=entry.split, mass=float(meta["mass"]),
+        name=entry.name, urdf=urdf, split=entry.split, mass=mass,
         friction=_FRICTION, size=tuple(meta["size"]), material="matte",
         graspable=meta["min_width"] < GRIPPER_OPENING, tags=(entry.category, "ycb"),
         inertia_from_file=True, rgba=rgba, min_width=float(meta["min_width"]))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import logging
 import statistics
+from dataclasses import replace
 from importlib.util import find_spec
 
 import numpy as np
@@ -156,6 +157,12 @@ def test_the_cache_is_reused_and_its_key_is_the_same_on_every_machine(tmp_path, 
     again = ycb.ycb_objects("all", params=FAST, root=tmp_path / "a", progress=False, names=die)
     assert len(calls) == 1  # nothing decomposed the second time
     assert again == first
+    # A corrected mass in the catalogue needs no new decomposition, and is the one loaded.
+    entries, density = ycb.ycb_catalogue()
+    die_entry = next(e for e in entries if e.name == "062_dice")
+    heavier = ycb.prepare_ycb_object(replace(die_entry, mass=0.0104), density, FAST,
+                                     tmp_path / "a")
+    assert len(calls) == 1 and heavier.mass == 0.0104
     other = ycb.ycb_objects("all", params={**FAST, "threshold": 0.25}, root=tmp_path / "a",
                             progress=False, names=die)
     assert len(calls) == 2 and other[0].urdf.parent != first[0].urdf.parent  # params: new key
