@@ -218,7 +218,7 @@ def measure_graspability(objects, n_poses: int = DEFAULT_POSES,
     executor : graspsim.executor.Executor or None
         Where objects run (default: in this process).
     cache : Path or None
-        The manifest written (default: the user's, see :func:`cache_dir`).
+        The manifest written (default: the user's, see :func:`graspsim.objects.cache_dir`).
 
     Returns
     -------
