@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	touch $@
 
 $(TEST_STAMP): pyproject.toml constraints.txt | $(BIN)/python
-	$(BIN)/python -m pip install $(CONSTRAINTS) -e ".[test,ray,docs,cnn]"
+	$(BIN)/python -m pip install $(CONSTRAINTS) -e ".[test,ray,docs,cnn,ycb]"
 	touch $(STAMP) $@
 
 run: $(STAMP)
@@ -52,7 +52,7 @@ constraints:
 	rm -rf .venv-constraints
 	$(PYTHON) -m venv .venv-constraints
 	.venv-constraints/bin/python -m pip install --upgrade pip
-	.venv-constraints/bin/python -m pip install -e ".[test,ray,docs,cnn]"
+	.venv-constraints/bin/python -m pip install -e ".[test,ray,docs,cnn,ycb]"
 	{ sed -n '/^#/p' constraints.txt; \
 	  .venv-constraints/bin/python -m pip freeze --exclude-editable; } > constraints.txt.new
 	mv constraints.txt.new constraints.txt

@@ -15,7 +15,8 @@ Each object's outcome (the first pose with a success, or None, and how many pose
 is cached in a small JSON manifest per gripper (the gripper's and the harness's parameters as
 a dict, hashed), keyed by the object's fingerprint (its files' bytes, its scale, mass and
 friction). Lookups read the committed manifest ``objects/graspability.json`` (the built-in set
-and those measured for the project's experiments) and then the user's, in
+and those measured for the project's experiments), those of :data:`SET_MANIFESTS` (the YCB
+set's, ``objects/ycb/graspability.json``) and then the user's, in
 ``$GRASPSIM_CACHE_DIR`` or ``$XDG_CACHE_HOME/graspsim`` (default ``~/.cache/graspsim``);
 :func:`measure_graspability` writes the user's.
 """
@@ -25,7 +26,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import os
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -37,15 +37,15 @@ from .execution import ExecutionParams
 from .gripper import GripperParams
 from .labelling import dense_candidates, label_rectangles
 from .object_sets import _fingerprint, as_object_set
-from .objects import ObjectSpec, assets_dir
+from .objects import ObjectSpec, assets_dir, cache_dir
 from .scene import build_scene, capture, make_scene
 
 __all__ = [
     "DEFAULT_POSES",
+    "SET_MANIFESTS",
     "BUDGET",
     "gripper_key",
     "object_key",
-    "cache_dir",
     "pose_outcome",
     "object_outcome",
     "measure_graspability",
@@ -69,6 +69,9 @@ CHUNK = 32
 SEED = 0
 
 _MANIFEST = "graspability.json"
+#: Committed manifests read after ``objects/graspability.json``, one per object set kept apart
+#: (paths in the package ``graspsim.assets``).
+SET_MANIFESTS = ("ycb/graspability.json",)
 
 
 def gripper_key(params: ExecutionParams | None = None, gripper: dict | None = None) -> dict:
@@ -101,17 +104,10 @@ def object_key(spec: ObjectSpec) -> str:
                   "friction": spec.friction})
 
 
-def cache_dir() -> Path:
-    """``$GRASPSIM_CACHE_DIR``, else ``$XDG_CACHE_HOME/graspsim``, else ``~/.cache/graspsim``."""
-    if os.environ.get("GRASPSIM_CACHE_DIR"):
-        return Path(os.environ["GRASPSIM_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "graspsim"
-
-
 def _manifest_paths(key: dict) -> list[Path]:
     tag = _hash(key)[:16]
-    return [assets_dir() / _MANIFEST, cache_dir() / f"graspability-{tag}.json"]
+    return [assets_dir() / _MANIFEST, *(assets_dir() / m for m in SET_MANIFESTS),
+            cache_dir() / f"graspability-{tag}.json"]
 
 
 def _read_entries(key: dict) -> dict:
@@ -225,7 +221,7 @@ def measure_graspability(objects, n_poses: int = DEFAULT_POSES,
     executor : graspsim.executor.Executor or None
         Where objects run (default: in this process).
     cache : Path or None
-        The manifest written (default: the user's, see :func:`cache_dir`).
+        The manifest written (default: the user's, see :func:`graspsim.objects.cache_dir`).
 
     Returns
     -------
@@ -243,7 +239,7 @@ def measure_graspability(objects, n_poses: int = DEFAULT_POSES,
     todo = [(s, k) for s, k in zip(specs, keys, strict=True)
             if not _known(entries.get(k), n_poses)]
     if todo:
-        path = cache if cache is not None else _manifest_paths(key)[1]
+        path = cache if cache is not None else _manifest_paths(key)[-1]
         ex = executor or Executor(backend="sequential")
         tasks = [(s, n_poses, params, entries.get(k, {}).get("poses_tried", 0))
                  for s, k in todo]

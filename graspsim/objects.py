@@ -26,6 +26,7 @@ __all__ = [
     "GRIPPER_OPENING",
     "MIN_INERTIA_RATIO",
     "condition_inertia",
+    "cache_dir",
 ]
 
 logger = logging.getLogger(__name__)
@@ -69,6 +70,17 @@ def condition_inertia(inertia, min_ratio: float = MIN_INERTIA_RATIO) -> np.ndarr
     if not 0.0 <= min_ratio <= 1.0:
         raise ValueError(f"min_ratio must be in [0, 1], got {min_ratio}")
     return np.maximum(inertia, min_ratio * inertia.max())
+
+
+def cache_dir() -> Path:
+    """The user's cache of graspsim (physics flags, YCB decompositions).
+
+    ``$GRASPSIM_CACHE_DIR``, else ``$XDG_CACHE_HOME/graspsim``, else ``~/.cache/graspsim``.
+    """
+    if os.environ.get("GRASPSIM_CACHE_DIR"):
+        return Path(os.environ["GRASPSIM_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "graspsim"
 
 
 def assets_dir() -> Path:

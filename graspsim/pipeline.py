@@ -231,8 +231,8 @@ class RunConfig:
             value = getattr(self, name)
             if not isinstance(value, str):
                 raise ValueError(f"{name} must be a string (an object set: train, test, all, "
-                                 f"comma-separated object names, random_urdfs[:split] or "
-                                 f"folder:PATH[:split]), got {value!r}")
+                                 "comma-separated object names, random_urdfs[:split], "
+                                 f"ycb[:split] or folder:PATH[:split]), got {value!r}")
             try:
                 self.object_set(name).specs()
             except (ValueError, FileNotFoundError) as exc:

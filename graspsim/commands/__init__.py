@@ -49,7 +49,8 @@ def add_object_args(p: argparse.ArgumentParser, default: str | None = "test",
     p.add_argument(*names, default=default, metavar="SET", **extra,
                    help="train, test, all (the built-in split), comma-separated names of "
                         "built-in objects, random_urdfs[:train|test|all] (pybullet_data's; "
-                        "test: the 100 folders ending in 0) or folder:PATH[:train|test|all] "
+                        "test: the 100 folders ending in 0), ycb[:train|test|all] (the YCB "
+                        "objects; pip install -e \".[ycb]\") or folder:PATH[:train|test|all] "
                         "(URDF and OBJ files)"
                         + ("" if default is None else " (default: %(default)s)"))
     p.add_argument("--object-scale", type=float, default=1.0, metavar="FACTOR",

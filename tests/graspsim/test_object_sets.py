@@ -38,7 +38,7 @@ def test_parse_every_form():
 
 @pytest.mark.parametrize("text, match", [
     ("", "non-empty"), ("random_urdfs:val", "split must be"), ("folder:", "needs a path"),
-    ("ycb:test", "choose train, test"),
+    ("shapenet:test", "choose train, test"),
 ])
 def test_parse_refuses_bad_text(text, match):
     with pytest.raises(ValueError, match=match):
