@@ -15,7 +15,7 @@ of metric verdict against physical outcome, and the pair with mask-pca on the sa
 ``<out>/table2_physical.{json,md}``.
 
 Usage: python scripts/table2_physical.py --labelled /path/standin/labelled [--sizes 100]
-       [--bench results/bench_scale] [--out results/table2-physical] [--jobs 1]
+       [--bench results/bench_scale[,OTHER]] [--out results/table2-physical] [--jobs 1]
 """
 
 from __future__ import annotations
@@ -52,11 +52,14 @@ def _rate(k: int, n: int) -> dict:
     return {"k": k, "n": n, "rate": k / n if n else float("nan"), "ci95": [lo, hi]}
 
 
-def size_rows(bench: Path, size: int, labelled: list) -> tuple[dict, dict]:
-    """The benchmark's top-1 rectangles per row (``"<row> <split>"``), keyed by the labelled
-    image id, and each row's Table 2 metric verdict per labelled image."""
+def size_rows(benches, size: int, labelled: list) -> tuple[dict, dict]:
+    """The benchmarks' top-1 rectangles per row (``"<row> <split>"``), keyed by the labelled
+    image id, and each row's Table 2 metric verdict per labelled image (``benches``: the
+    folders holding ``table2_<size>_<row>_<split>`` benchmark folders)."""
     rects, verdicts = {}, {}
-    for folder in sorted(bench.glob(f"table2_{size}_*")):
+    folders = [f for bench in benches for f in sorted(Path(bench).glob(f"table2_{size}_*"))
+               if (f / "results.jsonl").is_file()]
+    for folder in folders:
         row, split = folder.name.removeprefix(f"table2_{size}_").rsplit("_", 1)
         name = f"{row} {split}"
         rects[name], verdicts[name] = {}, {}
@@ -77,7 +80,8 @@ def size_rows(bench: Path, size: int, labelled: list) -> tuple[dict, dict]:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--labelled", required=True, help="the stand-in's labelled dataset folder")
-    ap.add_argument("--bench", default=str(REPO / "results" / "bench_scale"))
+    ap.add_argument("--bench", default=str(REPO / "results" / "bench_scale"),
+                    help="folders of Table 2 benchmark folders, comma-separated")
     ap.add_argument("--sizes", default="100")
     ap.add_argument("--out", default=str(REPO / "results" / "table2-physical"))
     ap.add_argument("--jobs", type=int, default=1)
@@ -92,7 +96,7 @@ def main(argv=None):
             raise SystemExit(f"{args.labelled}: {len(usable)} usable scenes, {size} needed: "
                              "label more scenes first")
         kept = usable[:size]
-        rects, verdicts = size_rows(Path(args.bench), size, kept)
+        rects, verdicts = size_rows(args.bench.split(","), size, kept)
         pca = {}
         for s in kept:
             obs = {"rgb": s.rgb, "depth": s.depth, "depth_valid": s.depth_valid}
