@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .hands import HAND_NAMES, hand_geometry
 from .objects import GRIPPER_OPENING, ObjectSpec, assets_dir, cache_dir
 
 __all__ = [
@@ -62,10 +63,11 @@ DECOMPOSITION = {"method": "coacd", "threshold": 0.1, "max_convex_hull": 16,
                  "preprocess_resolution": 30, "resolution": 1000, "mcts_iterations": 30,
                  "mcts_nodes": 10, "mcts_max_depth": 2, "seed": 0}
 
-#: m; the largest opening of any hand the project knows or plans (the Robotiq 2F-85's 85 mm
-#: stroke; the built-in and Franka hands open 80 mm). An object whose every convex part is
-#: wider than this in every direction cannot be grasped by any of them.
-LARGEST_OPENING = 0.085
+#: m; the largest opening of the hands the project has (:data:`graspsim.hands.HAND_NAMES`:
+#: the WSG 50's 110 mm; the Robotiq 2F-85 opens 85 mm, the built-in and Franka hands 80 mm).
+#: An object wider than this in every direction, with nothing to close on, cannot be grasped
+#: by any of them.
+LARGEST_OPENING = max(hand_geometry(h).max_opening for h in HAND_NAMES)
 
 #: The one line that says how to get the meshes.
 INSTALL_HINT = ('the YCB meshes come with the optional extra: pip install -e ".[ycb]" '

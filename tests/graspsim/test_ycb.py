@@ -88,12 +88,15 @@ def test_the_skipped_objects_are_those_too_large_and_the_density_is_the_median()
 def test_too_large_keeps_a_handle_and_refuses_a_big_ball():
     import trimesh
 
-    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    widest = ycb.LARGEST_OPENING  # the widest hand's opening
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.6 * widest)
     assert "too large" in ycb.too_large(ball.vertices)
-    assert ycb.too_large(trimesh.creation.icosphere(3, radius=0.04).vertices) is None
+    assert ycb.too_large(trimesh.creation.icosphere(3, radius=0.45 * widest).vertices) is None
+    # a mug wider than every hand opens, with a handle to close on
+    r = 0.6 * widest
     handle = trimesh.creation.box((0.02, 0.1, 0.02))
-    handle.apply_translation((0.07, 0, 0))
-    mug = trimesh.util.concatenate([trimesh.creation.annulus(0.045, 0.05, 0.1), handle])
+    handle.apply_translation((r + 0.02, 0, 0))
+    mug = trimesh.util.concatenate([trimesh.creation.annulus(r - 0.005, r, 0.1), handle])
     mug = mug.subdivide_to_size(0.005)  # vertices on the inner wall too, as a scan has
     assert ycb.too_large(mug.vertices) is None
 
