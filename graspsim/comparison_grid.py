@@ -33,8 +33,8 @@ from .execution import ExecutionParams
 from .trial_summary import summarize, wilson_interval
 from .trials import TrialConfig, run_trials
 
-__all__ = ["Row", "TRIAL_STEPS", "ROUND_STEPS", "run_cell", "row_results", "results_markdown",
-           "grow"]
+__all__ = ["Row", "TRIAL_STEPS", "ROUND_STEPS", "pick", "run_cell", "row_results",
+           "results_markdown", "grow"]
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +83,21 @@ class Row:
         if self.sizes is not None:
             return tuple(self.sizes)
         return TRIAL_STEPS if self.scene is None else ROUND_STEPS
+
+
+def pick(text: str, known, what: str) -> list[str]:
+    """The names of a comma-separated ``text``, each checked against ``known``.
+
+    Raises
+    ------
+    ValueError
+        Naming the unknown ones and the choices, in one line.
+    """
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    unknown = sorted(set(names) - set(known))
+    if unknown:
+        raise ValueError(f"unknown {what} {', '.join(unknown)}; choose from {', '.join(known)}")
+    return names
 
 
 def run_cell(row: Row, name: str, detector, n: int, out, executor=None, seed: int = 0,

@@ -28,7 +28,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from graspsim.comparison_grid import Row, grow
+from graspsim.comparison_grid import Row, grow, pick
 
 REPO = Path(__file__).resolve().parents[1]
 CURVE = REPO / "results" / "ggcnn-curve"
@@ -88,13 +88,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     table = rows(args.objects)
-    names = [r.strip() for r in args.rows.split(",") if r.strip()]
-    dets = [d.strip() for d in args.detectors.split(",") if d.strip()]
-    for given, known, what in ((names, table, "rows"), (dets, DETECTORS, "detectors")):
-        unknown = sorted(set(given) - set(known))
-        if unknown:
-            raise SystemExit(f"unknown {what} {', '.join(unknown)}; choose from "
-                             f"{', '.join(known)}")
+    try:
+        names = pick(args.rows, table, "rows")
+        dets = pick(args.detectors, DETECTORS, "detectors")
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
     from graspsim.executor import Executor
 
     ex = Executor(backend="loky" if args.jobs != 1 else "sequential", n_jobs=args.jobs,

@@ -32,7 +32,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from graspsim.comparison_grid import Row, grow
+from graspsim.comparison_grid import Row, grow, pick
 
 ROWS = {"pile": Row("pile", scene="pile"), "packed": Row("packed", scene="packed"),
         "franka": Row("franka", hand="franka")}
@@ -61,13 +61,11 @@ def main(argv=None) -> int:
                     help="growth steps to run (default: all, up to 200 trials and rounds)")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    rows = [r.strip() for r in args.rows.split(",") if r.strip()]
-    dets = [d.strip() for d in args.detectors.split(",") if d.strip()]
-    for given, known, what in ((rows, ROWS, "rows"), (dets, DETECTORS, "detectors")):
-        unknown = sorted(set(given) - set(known))
-        if unknown:
-            raise SystemExit(f"unknown {what} {', '.join(unknown)}; choose from "
-                             f"{', '.join(known)}")
+    try:
+        rows = pick(args.rows, ROWS, "rows")
+        dets = pick(args.detectors, DETECTORS, "detectors")
+    except ValueError as exc:
+        raise SystemExit(str(exc)) from None
     from graspsim.executor import Executor
     from graspsim.pipeline import trial_detector
 

@@ -46,3 +46,11 @@ def test_grid_grows_pairs_and_resumes(tmp_path):
     sizes = {d: (tmp_path / "drop" / d / "trials.jsonl").stat().st_size for d in dets}
     grow(rows, dets, _make, tmp_path)
     assert sizes == {d: (tmp_path / "drop" / d / "trials.jsonl").stat().st_size for d in dets}
+
+
+def test_pick_reads_a_list_and_names_the_unknown():
+    from graspsim.comparison_grid import pick
+
+    assert pick(" a, b ,,a", ("a", "b"), "rows") == ["a", "b", "a"]
+    with pytest.raises(ValueError, match=r"unknown rows c, d; choose from a, b"):
+        pick("a,d,c", ("a", "b"), "rows")
