@@ -43,6 +43,7 @@ from .rectangles import GraspRectangle, array_to_rects, rects_to_array
 
 __all__ = [
     "GraspSample",
+    "normalize_image_id",
     "CORNELL_WIDTH",
     "MAPPING_FILENAMES",
     "load_cornell",
@@ -436,7 +437,7 @@ def read_mapping(path) -> dict[str, str]:
                 raise CorruptFileError(
                     f"{path}:{lineno}: expected 'image_number object_id ...', got {s[:60]!r}"
                 )
-            image_id, object_id = _norm_image_id(parts[0]), parts[1]
+            image_id, object_id = normalize_image_id(parts[0]), parts[1]
             if image_id in mapping and mapping[image_id] != object_id:
                 raise CorruptFileError(
                     f"{path}:{lineno}: image {image_id} has object id {object_id!r}, but line "
@@ -447,7 +448,18 @@ def read_mapping(path) -> dict[str, str]:
     return mapping
 
 
-def _norm_image_id(token: str) -> str:
+def normalize_image_id(token: str) -> str:
+    """A Cornell image id as :func:`load_cornell` gives it: digits padded to four (``"7"`` is
+    ``"0007"``), anything else unchanged.
+
+    Parameters
+    ----------
+    token : str
+
+    Returns
+    -------
+    str
+    """
     return f"{int(token):04d}" if token.isdigit() else token
 
 
@@ -599,11 +611,11 @@ def iter_cornell(root, mapping=None, scale: float = 1.0, depth_source: str = "au
     if mapping is not None and not isinstance(mapping, dict):
         mapping = read_mapping(mapping)
     elif isinstance(mapping, dict):
-        mapping = {_norm_image_id(str(k)): str(v) for k, v in mapping.items()}
+        mapping = {normalize_image_id(str(k)): str(v) for k, v in mapping.items()}
 
     for rgb_path in _cornell_images(root):
         stem = rgb_path.name[:-len("r.png")]  # pcdXXXX
-        image_id = _norm_image_id(_CORNELL_RGB.match(rgb_path.name).group(1))
+        image_id = normalize_image_id(_CORNELL_RGB.match(rgb_path.name).group(1))
         folder = rgb_path.parent
         rgb = read_rgb(rgb_path)
         shape = rgb.shape[:2]

@@ -60,8 +60,12 @@ html_title = "dlsr-graspsim"
 html_static_path = []
 
 # Modules that are not public API: private helpers (a leading underscore), the CLI's subcommand
-# modules (documented on the command-line page) and the object set (package data).
-SKIP_PREFIXES = ("graspsim.commands", "graspsim.assets")
+# modules (documented on the command-line page), the object set (package data) and the old
+# home of the CNN peers (a shim for the entry point of earlier installs).
+SKIP_PREFIXES = ("graspsim.commands", "graspsim.assets", "graspsim.ggcnn")
+# graspsim's wings, lowest first (CONTRIBUTING.md, tests/test_import_graph.py): the API index
+# shows the package a wing at a time, in this order, the faces last.
+WINGS = ("runtime", "sim", "labels", "data", "detectors", "eval", "pipeline")
 
 
 def public_modules(packages=("dlsr", "graspsim")) -> list[str]:
@@ -97,16 +101,45 @@ def write_api_pages(app=None) -> None:
         wanted.add(page.name)
         if not page.exists() or page.read_text() != text:
             page.write_text(text)
-    index = ("API reference\n=============\n\nGenerated from the numpydoc docstrings of every "
-             "public module of ``dlsr`` (the method; never imports pybullet) and ``graspsim`` "
-             "(the simulator and harness).\n\n.. toctree::\n   :maxdepth: 1\n\n"
-             + "".join(f"   {m}\n" for m in modules))
+    index = api_index(modules)
     wanted.add("index.rst")
     if not (out / "index.rst").exists() or (out / "index.rst").read_text() != index:
         (out / "index.rst").write_text(index)
     for stale in out.glob("*.rst"):
         if stale.name not in wanted:
             stale.unlink()
+
+
+def _first_line(module: str) -> str:
+    """The first sentence of a package's docstring (read from the source, not imported)."""
+    import ast
+
+    path = REPO / module.replace(".", "/") / "__init__.py"
+    doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    return " ".join(doc.split(":")[0].replace("``", "").split()) if doc else module
+
+
+def api_index(modules: list[str]) -> str:
+    """``api/index.rst``: ``dlsr``, then ``graspsim`` one wing at a time (lowest first, each
+    captioned by its package's docstring), then graspsim's faces."""
+
+    def toctree(caption: str, names: list[str]) -> str:
+        return (f".. toctree::\n   :caption: {caption}\n   :maxdepth: 1\n\n"
+                + "".join(f"   {m}\n" for m in names) + "\n")
+
+    text = ("API reference\n=============\n\nGenerated from the numpydoc docstrings of every "
+            "public module of ``dlsr`` (the method; never imports pybullet) and ``graspsim`` "
+            "(the simulator and harness). ``graspsim`` is shown a wing at a time, in its import "
+            "order: each wing imports only the wings above it on this page.\n\n")
+    text += toctree("dlsr", [m for m in modules if m.split(".")[0] == "dlsr"])
+    placed = set()
+    for wing in WINGS:
+        names = [m for m in modules if m.startswith(f"graspsim.{wing}")
+                 and m.split(".")[1] == wing]
+        placed.update(names)
+        text += toctree(f"graspsim.{wing}: {_first_line(f'graspsim.{wing}')}", names)
+    faces = [m for m in modules if m.split(".")[0] == "graspsim" and m not in placed]
+    return text + toctree("graspsim: the environment and the command line", faces)
 
 
 def skip_member(app, what, name, obj, skip, options):

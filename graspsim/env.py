@@ -18,20 +18,22 @@ Reward 1.0 when the grasp lifts an object (>= 10 cm, held by both fingers), else
 when the episode was reset with ``options={"label": True}``: the action against the scene's
 physics-labelled positives (also given as ``info["positives"]`` by ``reset``).
 
-``scene`` chooses the protocol (:mod:`graspsim.scenes`: ``"drop"``, the default,
+``scene`` chooses the protocol (:mod:`graspsim.sim.layouts`: ``"drop"``, the default,
 ``"isolated"``, ``"packed"``, ``"pile"``; packed and pile scenes have 5 objects unless
 ``n_objects`` says otherwise). Default episode: one object, one grasp (``terminated`` after
 the step). ``declutter=True``:
 ``n_objects`` objects; a grasped object is removed (and so are objects pushed off the table,
 listed in ``info["fell_off"]``), the others settle and a new observation is rendered (the scene
-update of :func:`graspsim.declutter.scene_after_grasp`); the episode terminates when the table
+update of :func:`graspsim.eval.declutter.scene_after_grasp`); the episode terminates when the table
 is empty and is truncated by the ``max_episode_steps`` of the registration. Every random value
 comes from ``self.np_random`` (seeded by ``reset(seed=...)``), so the same seed gives the same
-observations and outcomes. ``execution`` (a :class:`graspsim.execution.ExecutionParams`) sets
+observations and outcomes. ``execution`` (a :class:`graspsim.sim.execution.ExecutionParams`) sets
 how grasps are executed and labelled, as for trials (e.g. ``ExecutionParams(min_grip=0.01)``).
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
@@ -40,12 +42,15 @@ from gymnasium import spaces
 from dlsr.metrics import rectangle_metric
 from dlsr.rectangles import GraspRectangle
 
-from .execution import ExecutionParams, execute_grasp, harness_grasps, run_grasp
-from .labelling import label_rectangles, rank_positives, sample_candidates
-from .scene import build_scene
-from .scenes import check_scene, default_objects_per_scene, make_scene_of
-from .sim import Simulation
-from .trials import profile_capture
+from .labels.graspability import resolve_objects
+from .labels.labelling import label_rectangles, rank_positives, sample_candidates
+from .sim.bullet import Simulation
+from .sim.execution import ExecutionParams, execute_grasp, harness_grasps, run_grasp
+from .sim.gripper import hand_params
+from .sim.layouts import check_scene, default_objects_per_scene, make_scene_of
+from .sim.observe import profile_capture
+from .sim.profiles import get_profile
+from .sim.scene import build_scene, scene_after_grasp
 
 __all__ = ["GraspEnv"]
 
@@ -59,26 +64,27 @@ class GraspEnv(gym.Env):
     ----------
     render_mode : {"rgb_array"} or None
     objects : str, ObjectSet or list of ObjectSpec
-        An object set (:func:`graspsim.trials.resolve_objects`: a built-in split or names,
+        An object set (:func:`graspsim.labels.graspability.resolve_objects`: a built-in split or
+        names,
         ``random_urdfs[:split]``, ``folder:PATH[:split]``).
     n_objects : int
         Objects per scene (default 1; 5 in declutter mode when not given).
     declutter : bool
     n_candidates : int
         Candidates executed to label a scene when ``reset(options={"label": True})``.
-    noise : graspsim.camera.DepthNoise or None
+    noise : graspsim.sim.camera.DepthNoise or None
         None: the profile's depth noise (the default profile's: Kinect-like).
-    profile : str, graspsim.profiles.SimProfile or None
+    profile : str, graspsim.sim.profiles.SimProfile or None
         How scenes are seen: camera height and intrinsics, table colour, lighting ranges and
-        depth noise (:mod:`graspsim.profiles`, e.g. ``"jacquard"``); None: the default. The
+        depth noise (:mod:`graspsim.sim.profiles`, e.g. ``"jacquard"``); None: the default. The
         observation space follows its image size.
-    execution : graspsim.execution.ExecutionParams or None
+    execution : graspsim.sim.execution.ExecutionParams or None
         How grasps are executed (and labelled); None: the harness's defaults.
     scene : {"drop", "isolated", "packed", "pile"}
-        How the objects are put on the table (:mod:`graspsim.scenes`); ``"drop"``, the
+        How the objects are put on the table (:mod:`graspsim.sim.layouts`); ``"drop"``, the
         default, is the scene of earlier versions.
     gripper : {"builtin", "franka", "wsg50", "robotiq-2f85"} or None
-        The hand (:mod:`graspsim.hands`; :func:`graspsim.gripper.hand_params`), replacing
+        The hand (:mod:`graspsim.sim.hands`; :func:`graspsim.sim.gripper.hand_params`), replacing
         ``execution``'s gripper parameters; None: those of ``execution`` (the built-in hand by
         default).
     """
@@ -88,9 +94,6 @@ class GraspEnv(gym.Env):
     def __init__(self, render_mode=None, objects="test", n_objects=None, declutter=False,
                  n_candidates=32, noise=None, profile=None, execution=None, scene="drop",
                  gripper=None):
-        from .profiles import get_profile
-        from .trials import resolve_objects
-
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if execution is not None and not isinstance(execution, ExecutionParams):
@@ -101,10 +104,6 @@ class GraspEnv(gym.Env):
         self._params = ExecutionParams() if execution is None else execution
         self.gripper = gripper
         if gripper is not None:
-            from dataclasses import replace
-
-            from .gripper import hand_params
-
             self._params = replace(self._params, gripper=hand_params(gripper))
         self.specs = resolve_objects(objects, self._params)
         self.declutter = bool(declutter)
@@ -214,9 +213,7 @@ class GraspEnv(gym.Env):
             }
             return obs, reward, terminated, False, info
         # Declutter: the grasped object leaves, objects pushed off the table too; the rest
-        # settle where the grasp left them (the same update as graspsim.declutter's rounds).
-        from .declutter import scene_after_grasp
-
+        # settle where the grasp left them (the same update as graspsim.eval.declutter's rounds).
         names = [o.spec.name for o in self._scene.objects]
         self._scene, fell = scene_after_grasp(self.sim, self._scene, bodies, res)
         info["fell_off"] = [names[i] for i in fell]

@@ -23,8 +23,8 @@ import numpy as np
 
 
 def _batches(n_batches, n_images=4, size=300, batch=8):
-    from graspsim.ggcnn.maps import grasp_maps
-    from graspsim.ggcnn.train import augment
+    from graspsim.detectors.ggcnn.maps import grasp_maps
+    from graspsim.detectors.ggcnn.train import augment
 
     rng = np.random.default_rng(0)
     X = rng.normal(size=(n_images, size, size)).astype(np.float32)
@@ -48,7 +48,7 @@ def _measure(torch, reused, n_batches, n_forwards):
     import contextlib
 
     from dlsr._memory import reused_heap
-    from graspsim.ggcnn.model import FILTERS, build_network
+    from graspsim.detectors.ggcnn.model import FILTERS, build_network
 
     torch.manual_seed(0)
     net = build_network(FILTERS)
@@ -91,7 +91,7 @@ def main(argv=None) -> int:
     p.add_argument("--forwards", type=int, default=30, help="timed forward passes")
     p.add_argument("--threads", type=int, default=2, help="torch threads")
     args = p.parse_args(argv)
-    from graspsim.ggcnn.model import require_torch
+    from graspsim.detectors.ggcnn.model import require_torch
 
     torch = require_torch()
     torch.set_num_threads(args.threads)

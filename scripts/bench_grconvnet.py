@@ -25,8 +25,8 @@ import numpy as np
 
 
 def _batches(spec, n_batches, size, batch=8, n_images=4):
-    from graspsim.ggcnn.maps import grasp_maps
-    from graspsim.ggcnn.train import augment
+    from graspsim.detectors.ggcnn.maps import grasp_maps
+    from graspsim.detectors.ggcnn.train import augment
 
     rng = np.random.default_rng(0)
     X = rng.normal(size=(n_images, spec.in_channels, size, size)).astype(np.float32)
@@ -49,7 +49,7 @@ def _cpu():
 
 def _measure(torch, network, arch, size, n_batches, n_forwards):
     from dlsr._memory import reused_heap
-    from graspsim.ggcnn.model import n_parameters, network_of
+    from graspsim.detectors.ggcnn.model import n_parameters, network_of
 
     spec = network_of(network)
     torch.manual_seed(0)
@@ -94,8 +94,8 @@ def main(argv=None) -> int:
     p.add_argument("--forwards", type=int, default=10, help="timed forward passes")
     p.add_argument("--threads", type=int, default=2, help="torch threads")
     args = p.parse_args(argv)
-    from graspsim.ggcnn.backend import require_torch
-    from graspsim.ggcnn.model import FILTERS
+    from graspsim.detectors.ggcnn.backend import require_torch
+    from graspsim.detectors.ggcnn.model import FILTERS
 
     torch = require_torch()
     torch.set_num_threads(args.threads)

@@ -4,7 +4,7 @@ Both paths label the same candidates (by default dense, ``sample_candidates(...,
 with a budget per scene; ``--sampler mixed`` for the mixed sampler) of the same seeded scenes
 of the train objects:
 
-* reference: every candidate executed by :func:`graspsim.execution.run_grasp` (scene rebuilt,
+* reference: every candidate executed by :func:`graspsim.sim.execution.run_grasp` (scene rebuilt,
   full motion sequence), i.e. ``label_rectangles(..., fast=False)``;
 * fast: ``label_rectangles(..., fast=True)`` (geometric precheck of collisions and empty
   closes in one built scene, hold ending once the object is still).
@@ -25,14 +25,16 @@ import argparse
 import json
 import time
 
-from graspsim.executor import Executor
-from graspsim.labelling import label_rectangles, sample_candidates
-from graspsim.trials import _worker_sim, observe_scene, resolve_objects
+from graspsim.labels.graspability import resolve_objects
+from graspsim.labels.labelling import label_rectangles, sample_candidates
+from graspsim.runtime.executor import Executor
+from graspsim.sim.bullet import worker_sim
+from graspsim.sim.observe import observe_scene
 
 
 def label_scene(seed, index, budget, fast, mode="dense", objects="train"):
     """Label one scene's dense candidates; returns verdicts, wall and CPU seconds, physics count."""
-    sim = _worker_sim()  # one simulator per process
+    sim = worker_sim()  # one simulator per process
     t0 = time.perf_counter()
     scene, bodies, frame, st = observe_scene(sim, resolve_objects(objects), seed, index)
     cands = sample_candidates(frame.segmentation, bodies.objects, st["label"], budget,
@@ -46,7 +48,7 @@ def label_scene(seed, index, budget, fast, mode="dense", objects="train"):
 
 
 def _warm_up(j):
-    _worker_sim()
+    worker_sim()
     return j
 
 

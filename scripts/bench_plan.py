@@ -43,8 +43,9 @@ KEYS = ("rgb", "depth", "depth_valid", "K", "T_world_cam", "seed")
 
 def observations(n, seed, path):
     """The first ``n`` test scenes' observations of ``seed``, written to ``path`` (npz)."""
-    from graspsim.sim import Simulation
-    from graspsim.trials import observation, observe_scene, resolve_objects
+    from graspsim.labels.graspability import resolve_objects
+    from graspsim.sim.bullet import Simulation
+    from graspsim.sim.observe import observation, observe_scene
 
     sim = Simulation()
     arrays = {}
@@ -73,8 +74,8 @@ def _load(path):
 def _detectors(names, model, ggcnn, hand):
     """The trial stage's detectors (``graspsim run``'s defaults), by name."""
     from dlsr.detection import DLSRDetector
-    from graspsim.detector_options import DetectorOptions, build_real_detector
     from graspsim.detectors import load_detector
+    from graspsim.detectors.dlsr_options import DetectorOptions, build_real_detector
     from graspsim.pipeline import RunConfig
 
     config = RunConfig()

@@ -1,6 +1,6 @@
 """Time and memory of the paper's Tables 1 and 2 at Cornell's size (one JSON object on stdout).
 
-For each size (images), on the Cornell-sized stand-in (:mod:`graspsim.standin`, made or reused
+For each size (images), on the Cornell-sized stand-in (:mod:`graspsim.data.standin`, made or reused
 under ``--standin``; the smaller sizes are its first images):
 
 * **table1**: ``graspsim benchmark recognition`` with all 36 learner x encoder cells,
@@ -57,7 +57,7 @@ import numpy as np
 
 from dlsr.records import read_json, write_json_atomic
 from graspsim.cli import sigterm_unwinds, stop_reason
-from graspsim.standin import CORNELL, standin_subset
+from graspsim.data.standin import CORNELL, standin_subset
 
 TABLE2_ROWS = (("NKM", "Natural"), ("NKM", "SC"), ("OMP", "Natural"), ("RP", "Natural"))
 

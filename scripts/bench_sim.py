@@ -20,23 +20,19 @@ import time
 
 import numpy as np
 
-from graspsim.execution import ExecutionParams, harness_grasps, run_grasp
-from graspsim.labelling import label_rectangles, sample_candidates
-from graspsim.scene import build_scene, capture, make_scene
-from graspsim.sim import Simulation
-from graspsim.trials import (
-    TrialConfig,
-    observe_scene,
-    resolve_objects,
-    run_trials,
-    trial_streams,
-)
+from graspsim.eval.trials import TrialConfig, run_trials
+from graspsim.labels.graspability import resolve_objects
+from graspsim.labels.labelling import label_rectangles, sample_candidates
+from graspsim.sim.bullet import Simulation
+from graspsim.sim.execution import ExecutionParams, harness_grasps, run_grasp
+from graspsim.sim.observe import observe_scene, trial_streams
+from graspsim.sim.scene import build_scene, capture, make_scene
 
 
 def render_ms(specs, n=10):
     sim = Simulation()
     times, clean = [], []
-    from graspsim.camera import Camera
+    from graspsim.sim.camera import Camera
 
     for i in range(n):
         st = trial_streams(123, i)

@@ -11,7 +11,7 @@ samples by default), beside the baselines on the same images:
 - sim + real: the same folds, with every synthetic image joined to each training fold
   (``--extra-train``), never to a test fold.
 
-All runs go through :func:`graspsim.benchmarks.detection_benchmark` and resume in
+All runs go through :func:`graspsim.eval.offline.detection.detection_benchmark` and resume in
 ``<out>/{sim_to_real,real_cv,sim_plus_real_cv}``; ``<out>/crossdata.md`` and
 ``crossdata.json`` put them side by side with exact McNemar tests between the rows.
 
@@ -28,8 +28,10 @@ import time
 from pathlib import Path
 
 from dlsr.detection import DLSRDetector, train_detector
-from graspsim.benchmarks import detection_benchmark, load_samples, paired_detection_test
-from graspsim.executor import Executor
+from graspsim.data.samples import load_samples
+from graspsim.eval.offline.detection import detection_benchmark
+from graspsim.eval.stats import paired_detection_test
+from graspsim.runtime.executor import Executor
 
 REPO = Path(__file__).resolve().parents[1]
 ROWS = {"sim_to_real": "sim -> real (trained on synthetic images only)",

@@ -12,9 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
-from graspsim.camera import Camera, DepthNoise, depth_figure, look_down_pose, random_table_texture
-from graspsim.objects import builtin_objects, load_object
-from graspsim.sim import connect
+from graspsim.sim.bullet import connect
+from graspsim.sim.camera import (
+    Camera,
+    DepthNoise,
+    depth_figure,
+    look_down_pose,
+    random_table_texture,
+)
+from graspsim.sim.objects import builtin_objects, load_object
 
 OBJECTS = [  # (name, x, y, yaw): one of each material class, concave and thin shapes
     ("mug_classic", 0.09, 0.07, 0.6),

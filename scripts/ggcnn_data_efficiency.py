@@ -1,6 +1,6 @@
 """The data-efficiency curve: DLSR (default and paper) against GG-CNN at 10, 30, 100 and 300
 training scenes of the train objects, physical success on the same test scenes (README,
-docs/experiments/2026-12-03-ggcnn.md; library: graspsim.ggcnn.curve).
+docs/experiments/2026-12-03-ggcnn.md; library: graspsim.eval.data_efficiency).
 
     nice -n 10 .venv/bin/python scripts/ggcnn_data_efficiency.py [--out results/ggcnn-curve] \\
         [--sizes 10 30 100 300] [--budgets 2000 5000 10000 20000] [--test-trials 200] \\
@@ -23,7 +23,7 @@ import logging
 import sys
 
 from graspsim.cli import sigterm_unwinds, stop_reason
-from graspsim.ggcnn.curve import data_efficiency
+from graspsim.eval.data_efficiency import data_efficiency
 
 
 def main(argv=None) -> int:

@@ -38,9 +38,9 @@ def draw(run, data, fmt, out) -> Path:
 
     from dlsr.detection import sample_observation
     from dlsr.rectangles import corners_from_array, rects_to_array
-    from graspsim.benchmarks import load_samples
-    from graspsim.ggcnn.detector import GGCNNDetector, crop_input
-    from graspsim.ggcnn.evaluate import config_key
+    from graspsim.data.samples import load_samples
+    from graspsim.detectors.ggcnn.detector import GGCNNDetector, crop_input
+    from graspsim.eval.offline.ggcnn import config_key
 
     run = Path(run)
     summary = json.loads((run / "ggcnn.json").read_text())

@@ -2,7 +2,7 @@
 
 For the built-in train objects and every 15th object of pybullet_data's random_urdfs train
 split (60 objects), the dense physics labeller searches up to 16 settled poses for a successful
-grasp (:func:`graspsim.graspability.measure_graspability`; each object stops at its first
+grasp (:func:`graspsim.labels.graspability.measure_graspability`; each object stops at its first
 success, so the first pose with a success is known). The flags at K = 1, 2, 4, 8 and 16 follow,
 and the objects whose flag changes between consecutive K. The test splits are not used.
 
@@ -24,9 +24,9 @@ import logging
 import sys
 from pathlib import Path
 
-from graspsim.executor import Executor
-from graspsim.graspability import measure_graspability
-from graspsim.objects import builtin_objects, random_urdf_objects
+from graspsim.labels.graspability import measure_graspability
+from graspsim.runtime.executor import Executor
+from graspsim.sim.objects import builtin_objects, random_urdf_objects
 
 KS = (1, 2, 4, 8, 16)
 
@@ -68,10 +68,10 @@ def explain(name: str) -> dict:
     """How ``name`` rests in its first pose with a success, and the grasp that lifted it."""
     import numpy as np
 
-    from graspsim import graspability as g
-    from graspsim.labelling import label_rectangles
-    from graspsim.scene import build_scene, capture, make_scene
-    from graspsim.sim import Simulation
+    from graspsim.labels import graspability as g
+    from graspsim.labels.labelling import label_rectangles
+    from graspsim.sim.bullet import Simulation
+    from graspsim.sim.scene import build_scene, capture, make_scene
 
     spec = next(s for s in builtin_objects("all") if s.name == name)
     entry = g._read_entries(g.gripper_key()).get(g.object_key(spec))
@@ -98,7 +98,7 @@ def explain(name: str) -> dict:
                                    depth_valid=frame.depth_clean > 0)
             hits = [i for i, r in enumerate(lab.results) if r.success]
             if hits:
-                from graspsim.execution import harness_grasps
+                from graspsim.sim.execution import harness_grasps
 
                 grasp = harness_grasps([chunk[hits[0]]], frame, scene.table_z,
                                        depth=frame.depth_clean,

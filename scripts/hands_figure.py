@@ -1,7 +1,7 @@
 """Picture of the hands side by side at one scale: docs/hands.png.
 
 Every hand of ``--gripper`` open to its largest opening, fingers down, seen from the side by an
-orthographic camera above a ruler of 1 cm ticks (:func:`graspsim.trialviz.hands_picture`).
+orthographic camera above a ruler of 1 cm ticks (:func:`graspsim.eval.trialviz.hands_picture`).
 
     .venv/bin/python scripts/hands_figure.py [--out docs/hands.png]
 """
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import cv2
 
-from graspsim.trialviz import hands_picture
+from graspsim.eval.trialviz import hands_picture
 
 
 def main(argv=None) -> int:

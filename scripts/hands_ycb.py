@@ -1,6 +1,6 @@
 """Issue 53, item 3: one detector, every hand, the same scenes (YCB test objects by default).
 
-Rows (:mod:`graspsim.comparison_grid`): single-object trials with each of the four hands
+Rows (:mod:`graspsim.eval.comparison_grid`): single-object trials with each of the four hands
 (``builtin``, ``franka``, ``wsg50``, ``robotiq-2f85``), and pile and packed clutter-removal
 rounds of 5 objects with the Franka and the Robotiq hands. Columns: DLSR and ``dlsr-paper``,
 GG-CNN (gripper-aware) and mask-pca and the oracle, every detector on the same seeded scenes.
@@ -28,7 +28,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from graspsim.comparison_grid import Row, grow, pick
+from graspsim.eval.comparison_grid import Row, grow, pick
 
 REPO = Path(__file__).resolve().parents[1]
 CURVE = REPO / "results" / "ggcnn-curve"
@@ -70,7 +70,7 @@ def make_detector(name: str, row: Row, curve: Path = CURVE):
     if name == "dlsr-paper":
         return DLSRDetector.load(curve / "models" / f"dlsr-paper_{SIZE}").detector("dense")
     if name == "ggcnn+aware":
-        from graspsim.ggcnn.detector import GGCNNDetector
+        from graspsim.detectors.ggcnn.detector import GGCNNDetector
 
         return gripper_aware(GGCNNDetector(ggcnn_model(curve)), hand=row.hand)
     return load_detector(name)
@@ -93,7 +93,7 @@ def main(argv=None) -> int:
         dets = pick(args.detectors, DETECTORS, "detectors")
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
-    from graspsim.executor import Executor
+    from graspsim.runtime.executor import Executor
 
     ex = Executor(backend="loky" if args.jobs != 1 else "sequential", n_jobs=args.jobs,
                   progress=False)

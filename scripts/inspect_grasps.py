@@ -1,7 +1,8 @@
 """Replay a trial folder's rectangles and print what the object and the pads do in each phase.
 
 For harness diagnoses (why a thin object slips, what a collision hits): trial ``i``'s scene is
-rebuilt (:func:`graspsim.trials.observe_scene`), its recorded rectangle executed with the current
+rebuilt (:func:`graspsim.sim.observe.observe_scene`), its recorded rectangle executed with the
+current
 harness and the folder's execution parameters, and at the end of each phase (pregrasp, approach,
 close, lift, hold) one JSON line per trial records, in the gripper frame (x closing, z approach,
 TCP at 0, fingertips at +10 mm, palm at -40 mm): the object's roll about its own x axis and tilt
@@ -26,10 +27,12 @@ from scipy.spatial.transform import Rotation
 
 from dlsr.records import read_jsonl
 from dlsr.rectangles import GraspRectangle
-from graspsim.execution import execute_grasp, harness_grasps
-from graspsim.scene import build_scene
-from graspsim.sim import Simulation
-from graspsim.trials import campaign_execution_params, observe_scene, resolve_objects
+from graspsim.eval.trials import campaign_execution_params
+from graspsim.labels.graspability import resolve_objects
+from graspsim.sim.bullet import Simulation
+from graspsim.sim.execution import execute_grasp, harness_grasps
+from graspsim.sim.observe import observe_scene
+from graspsim.sim.scene import build_scene
 
 
 def _mm(v) -> list[float]:

@@ -27,14 +27,16 @@ import time
 import numpy as np
 
 from dlsr.metrics import rectangle_metric_many
-from graspsim.executor import Executor
-from graspsim.labelling import label_rectangles, sample_candidates
-from graspsim.trials import _worker_sim, observe_scene, resolve_objects
+from graspsim.labels.graspability import resolve_objects
+from graspsim.labels.labelling import label_rectangles, sample_candidates
+from graspsim.runtime.executor import Executor
+from graspsim.sim.bullet import worker_sim
+from graspsim.sim.observe import observe_scene
 
 
 def scene_coverage(seed, index, n_reference, mixed_n, budgets):
     """Reference successes of one scene and, per labelling, how many its positives cover."""
-    sim = _worker_sim()
+    sim = worker_sim()
     scene, bodies, frame, st = observe_scene(sim, resolve_objects("train"), seed, index)
     ref_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(index, 1 << 20)))
     ref = sample_candidates(frame.segmentation, bodies.objects, ref_rng, n_reference,

@@ -1,4 +1,5 @@
-"""Write the Cornell-sized stand-in (graspsim.standin): 885 simulated images of 240 objects in the
+"""Write the Cornell-sized stand-in (graspsim.data.standin): 885 simulated images of 240 objects in
+the
 Cornell layout, with about 5,110 positive and 2,909 negative physics-labelled rectangles.
 
 Resumes: the labelled scenes are kept in OUT/labelled and reused by a rerun.
@@ -12,7 +13,7 @@ import argparse
 import json
 import logging
 
-from graspsim.standin import CORNELL, make_cornell_standin
+from graspsim.data.standin import CORNELL, make_cornell_standin
 
 
 def main(argv=None) -> int:

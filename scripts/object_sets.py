@@ -15,7 +15,7 @@ The README's row for pybullet_data's ``random_urdfs`` test split (isolated objec
    ``<out>/<objects>/<detector>/``, resumed trial by trial.
 3. Each detector's success with a Wilson 95 % interval, its paired difference to mask-pca
    (Newcombe interval, exact McNemar p), and the trials on objects the physics graspability
-   flag (:mod:`graspsim.graspability`, computed and cached when missing) marks not graspable:
+   flag (:mod:`graspsim.labels.graspability`, computed and cached when missing) marks not graspable:
    ``<out>/<objects>/table.json`` and ``table.md``.
 
 Nothing is chosen on the trial objects: every setting is the default job's.
@@ -29,11 +29,12 @@ import logging
 import sys
 from pathlib import Path
 
-from graspsim.compare import compare_outcomes
-from graspsim.executor import Executor
-from graspsim.object_sets import parse_object_set
+from graspsim.eval.compare import compare_outcomes
+from graspsim.eval.stats import wilson_interval
+from graspsim.eval.trials import TrialConfig, run_trials
 from graspsim.pipeline import RunConfig, run_job, trial_detector
-from graspsim.trials import TrialConfig, run_trials, wilson_interval
+from graspsim.runtime.executor import Executor
+from graspsim.sim.object_sets import parse_object_set
 
 DETECTORS = ("dlsr", "dlsr-paper", "mask-pca", "oracle")
 
@@ -84,7 +85,7 @@ def main(argv=None) -> int:
 def trial_table(folder: Path, names, oset, compute: bool) -> dict:
     """Success, intervals, paired verdicts against mask-pca and the not-graspable check, on
     the trial indices every detector has finished (all of them once the runs are complete)."""
-    from graspsim.graspability import graspability_flags
+    from graspsim.labels.graspability import graspability_flags
 
     flags = graspability_flags(oset, compute=compute, partial=not compute)
     recs = {}

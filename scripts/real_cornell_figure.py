@@ -25,7 +25,7 @@ from PIL import Image, ImageDraw
 
 from dlsr.datasets import load_jacquard
 from dlsr.detection import DLSRDetector, detect_files, train_detector
-from graspsim.detector_options import PRESETS, REAL_DEFAULT, build_real_detector
+from graspsim.detectors.dlsr_options import PRESETS, REAL_DEFAULT, build_real_detector
 
 CROP = (150, 200, 450, 420)  # x0, y0, x1, y1: the remote and the table around it
 

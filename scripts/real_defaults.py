@@ -1,9 +1,9 @@
 """Choose the real-data detector defaults by nested object-wise cross-validation; prints JSON.
 
 On a real dataset (the Jacquard samples by default), every candidate configuration of
-:func:`graspsim.detector_options.candidate_options` (the paper's, each departure from it
+:func:`graspsim.detectors.dlsr_options.candidate_options` (the paper's, each departure from it
 alone, all of them) is cross-validated on each outer fold's training objects, the best is
-chosen there and reported on the outer fold (:func:`graspsim.benchmarks.
+chosen there and reported on the outer fold (:func:`graspsim.eval.offline.detection.
 nested_detector_choice`). The record is docs/experiments/2026-12-03-real-defaults.md.
 
     .venv/bin/python scripts/real_defaults.py --data ../shared/data/jacquard_samples \\
@@ -19,8 +19,8 @@ import argparse
 import json
 import sys
 
-from graspsim.benchmarks import nested_detector_choice
 from graspsim.commands import add_executor_args, executor_from_args
+from graspsim.eval.offline.nested import nested_detector_choice
 
 
 def main(argv=None) -> int:

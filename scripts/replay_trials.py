@@ -1,7 +1,7 @@
 """Re-execute the rectangles of finished trial folders in their rebuilt scenes; prints JSON.
 
 Paired harness experiments: trial ``i`` of every folder of one run (same seed and objects) is the
-same scene, rebuilt exactly by :func:`graspsim.trials.observe_scene`; each folder's recorded
+same scene, rebuilt exactly by :func:`graspsim.sim.observe.observe_scene`; each folder's recorded
 rectangle is turned into a grasp and executed again with the current harness and the execution
 parameters the folder recorded (``config.json``), optionally with one execution or grasp
 parameter changed. The oracle's rectangles are replayed as recorded (they
@@ -23,9 +23,11 @@ from pathlib import Path
 
 from dlsr.records import read_jsonl
 from dlsr.rectangles import GraspRectangle
-from graspsim.execution import harness_grasps, run_grasp
-from graspsim.sim import Simulation
-from graspsim.trials import campaign_execution_params, observe_scene, resolve_objects
+from graspsim.eval.trials import campaign_execution_params
+from graspsim.labels.graspability import resolve_objects
+from graspsim.sim.bullet import Simulation
+from graspsim.sim.execution import harness_grasps, run_grasp
+from graspsim.sim.observe import observe_scene
 
 
 def main(argv=None) -> int:
@@ -44,7 +46,7 @@ def main(argv=None) -> int:
         if not cfg.exists():
             p.error(f"{cfg}: not found (not a trial folder)")
         configs.append(json.loads(cfg.read_text()))
-        # Read only (graspsim.trials.read_done would rewrite a torn file).
+        # Read only (graspsim.runtime.campaign.read_done would rewrite a torn file).
         records[f.name] = {int(r["index"]): r for r in read_jsonl(f / "trials.jsonl")}
     keys = {(c["seed"], json.dumps(c["objects"]), c["config"]["n_objects"]) for c in configs}
     if len(keys) != 1:

@@ -32,7 +32,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from graspsim.comparison_grid import Row, grow, pick
+from graspsim.eval.comparison_grid import Row, grow, pick
 
 ROWS = {"pile": Row("pile", scene="pile"), "packed": Row("packed", scene="packed"),
         "franka": Row("franka", hand="franka")}
@@ -66,8 +66,8 @@ def main(argv=None) -> int:
         dets = pick(args.detectors, DETECTORS, "detectors")
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
-    from graspsim.executor import Executor
     from graspsim.pipeline import trial_detector
+    from graspsim.runtime.executor import Executor
 
     args.out.mkdir(parents=True, exist_ok=True)
     model_path, cfg = (model(args.out, args.jobs) if {"dlsr", "dlsr-paper"} & set(dets)

@@ -7,12 +7,12 @@ Two parts (``docs/sim_settings.md`` reports both):
   (rendered without labelling): object size in pixels, depth of the table, missing depth on
   the object and elsewhere, brightness and saturation of the background.
 * ``study``: for each variant, a physics-labelled dataset of the train objects (the same
-  seed, so the same objects at the same poses; ``graspsim.datagen.make_dataset``), a
+  seed, so the same objects at the same poses; ``graspsim.data.datagen.make_dataset``), a
   detector trained on it alone and evaluated on every Jacquard sample view
   (``scripts/crossdata_detection.py``, row ``sim_to_real``), and the exact McNemar test of
   each variant against ``default`` over the same images. Everything resumes.
 
-Variants (one setting changed at a time; ``graspsim.profiles.SimProfile`` fields):
+Variants (one setting changed at a time; ``graspsim.sim.profiles.SimProfile`` fields):
 
 - ``default``: the simulator's defaults;
 - ``closer``: the camera 0.40-0.50 m above the table instead of 0.6-0.8 m (objects about
@@ -41,8 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from graspsim.camera import DepthNoise, LightRanges
-from graspsim.profiles import PROFILES, SimProfile
+from graspsim.sim.camera import DepthNoise, LightRanges
+from graspsim.sim.profiles import PROFILES, SimProfile
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT = PROFILES["default"]
@@ -91,7 +91,9 @@ def _summary(rows: list[dict]) -> dict:
 
 def measure(args) -> dict:
     from dlsr.datasets import load_jacquard, read_depth_image
-    from graspsim.trials import _worker_sim, observe_scene, resolve_objects
+    from graspsim.labels.graspability import resolve_objects
+    from graspsim.sim.bullet import worker_sim
+    from graspsim.sim.observe import observe_scene
 
     res = {"percentiles": [10, 50, 90]}
     for depth in ("stereo", "perfect"):
@@ -106,7 +108,7 @@ def measure(args) -> dict:
                               "depth_m_p5_p50_p95": np.percentile(d[ok], [5, 50, 95]).round(3)
                               .tolist()}
     res["cornell"] = cornell
-    sim = _worker_sim()
+    sim = worker_sim()
     specs = resolve_objects("train")
     for name in args.variants:
         rows = []
@@ -133,9 +135,9 @@ def study(args) -> dict:
     sys.path.insert(0, str(REPO / "scripts"))
     import crossdata_detection
 
-    from graspsim.benchmarks import paired_detection_test
-    from graspsim.datagen import make_dataset
-    from graspsim.executor import Executor
+    from graspsim.data.datagen import make_dataset
+    from graspsim.eval.stats import paired_detection_test
+    from graspsim.runtime.executor import Executor
 
     args.out.mkdir(parents=True, exist_ok=True)
     runs, info = {}, {}

@@ -2,10 +2,10 @@
 
 For each size measured by ``scripts/bench_scale.py`` (its committed ``table2_<size>_<row>_<split>``
 folders), every detection row's top-1 rectangle and mask-pca's are executed in each image's
-rebuilt scene with :func:`graspsim.scoring.score_predictions` (``graspsim score``). The
+rebuilt scene with :func:`graspsim.eval.scoring.score_predictions` (``graspsim score``). The
 stand-in's images are scenes of its labelled dataset (``OUT/labelled`` of
-:func:`graspsim.standin.make_cornell_standin`): image ``k`` is the ``k``-th labelled scene
-with both labels (:func:`graspsim.standin.usable_scenes`), so a labelled folder holding the
+:func:`graspsim.data.standin.make_cornell_standin`): image ``k`` is the ``k``-th labelled scene
+with both labels (:func:`graspsim.data.standin.usable_scenes`), so a labelled folder holding the
 first scenes is enough; each image's object is checked against the benchmark's record.
 
 Per row and split: physical success (Wilson 95 %), the rectangle metric of Table 2 (against
@@ -29,11 +29,10 @@ import numpy as np
 
 from dlsr.datasets import load_cornell
 from dlsr.records import read_jsonl, write_json_atomic, write_text_atomic
-from graspsim.compare import mcnemar_exact, paired_counts
+from graspsim.data.standin import usable_scenes
 from graspsim.detectors import MaskPCADetector
-from graspsim.scoring import score_predictions
-from graspsim.standin import usable_scenes
-from graspsim.trial_summary import wilson_interval
+from graspsim.eval.scoring import score_predictions
+from graspsim.eval.stats import mcnemar_exact, paired_counts, wilson_interval
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -1,6 +1,7 @@
 """The paper's Table 3 on real data: standard against self-taught detection.
 
-Runs :func:`graspsim.benchmarks.selftaught_benchmark`: each learner-encoder combination is
+Runs :func:`graspsim.eval.offline.selftaught.selftaught_benchmark`: each learner-encoder combination
+is
 evaluated by object-wise cross-validated detection (rectangle metric, top-1) on ``--data``
 twice, without and with the unlabelled patches of ``--patches`` (e.g. ``graspsim patches
 --objects train --n 100000 --out patches.npz``) joined to dictionary learning, and the two are
@@ -22,8 +23,8 @@ import json
 import time
 from pathlib import Path
 
-from graspsim.benchmarks import TABLE3_COMBINATIONS, selftaught_benchmark
-from graspsim.executor import Executor
+from graspsim.eval.offline.selftaught import TABLE3_COMBINATIONS, selftaught_benchmark
+from graspsim.runtime.executor import Executor
 
 REPO = Path(__file__).resolve().parents[1]
 

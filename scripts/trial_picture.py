@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import argparse
 
-from graspsim.labelling import label_rectangles, rank_positives, sample_candidates
-from graspsim.objects import builtin_objects
-from graspsim.sim import Simulation
-from graspsim.trials import observe_scene
-from graspsim.trialviz import save_gif, save_strip, trial_frames
+from graspsim.eval.trialviz import save_gif, save_strip, trial_frames
+from graspsim.labels.labelling import label_rectangles, rank_positives, sample_candidates
+from graspsim.sim.bullet import Simulation
+from graspsim.sim.objects import builtin_objects
+from graspsim.sim.observe import observe_scene
 
 
 def main(argv=None) -> int:

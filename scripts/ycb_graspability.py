@@ -3,12 +3,12 @@
     .venv/bin/python scripts/ycb_graspability.py --hand builtin --split test --jobs 1
     .venv/bin/python scripts/ycb_graspability.py --hand franka --jobs 1
 
-The flags are :mod:`graspsim.graspability`'s (a successful grasp of the dense labeller in one
+The flags are :mod:`graspsim.labels.graspability`'s (a successful grasp of the dense labeller in one
 of K = 16 settled poses), keyed by hand (the gripper and harness parameters) and by object (its
 mesh, decomposition, mass and friction) in ``objects/ycb/graspability.json``, the manifest the
 loader reads beside ``objects/graspability.json``. Objects already measured are not measured
 again, so a stopped run resumes and a new hand (any name
-:meth:`graspsim.execution.ExecutionParams.with_hand` knows) is added by the same command.
+:meth:`graspsim.sim.execution.ExecutionParams.with_hand` knows) is added by the same command.
 Prints a JSON summary: per object its first successful pose (or null) and the count graspable.
 """
 
@@ -19,11 +19,11 @@ import json
 import logging
 import sys
 
-from graspsim.execution import ExecutionParams
-from graspsim.executor import Executor
-from graspsim.graspability import DEFAULT_POSES, SET_MANIFESTS, measure_graspability
-from graspsim.object_sets import parse_object_set
-from graspsim.objects import assets_dir
+from graspsim.labels.graspability import DEFAULT_POSES, SET_MANIFESTS, measure_graspability
+from graspsim.runtime.executor import Executor
+from graspsim.sim.execution import ExecutionParams
+from graspsim.sim.object_sets import parse_object_set
+from graspsim.sim.objects import assets_dir
 
 
 def main(argv=None) -> int:

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from graspsim.object_sets import parse_object_set
-from graspsim.sim import connect, quiet_c_output
+from graspsim.sim.bullet import connect, quiet_c_output
+from graspsim.sim.object_sets import parse_object_set
 
 TILE = 200
 

@@ -39,8 +39,8 @@ def _text(source: str) -> str:
 
 @pytest.mark.parametrize("module, name, parameters", [
     ("dlsr.coding", "lasso", ["X", "D", "lam"]),
-    ("graspsim.trials", "run_trials", ["detector", "objects", "n", "seed", "out"]),
-    ("graspsim.detectors", "GraspDetector", ["obs"]),
+    ("graspsim.eval.trials", "run_trials", ["detector", "objects", "n", "seed", "out"]),
+    ("graspsim.detectors.base", "GraspDetector", ["obs"]),
 ])
 def test_api_pages_show_the_public_names_with_their_parameters(site, module, name, parameters):
     page = site / "api" / f"{module}.html"
@@ -61,7 +61,7 @@ def test_every_module_has_an_api_page(site):
     conf = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(conf)
     names = conf.public_modules()
-    assert {"dlsr.coding", "dlsr.detection.registry", "graspsim.trials"} <= set(names)
+    assert {"dlsr.coding", "dlsr.detection.registry", "graspsim.eval.trials"} <= set(names)
     assert not [n for n in names if not (site / "api" / f"{n}.html").exists()]
 
 

@@ -23,11 +23,11 @@ def add_executor_args(p: argparse.ArgumentParser, jobs_default: int = 1) -> None
 
 
 def executor_from_args(args: argparse.Namespace, progress: bool = True):
-    """The :class:`graspsim.executor.Executor` that :func:`add_executor_args` describes.
+    """The :class:`graspsim.runtime.executor.Executor` that :func:`add_executor_args` describes.
 
     ``--backend loky`` with one job runs in the calling process (no worker start-up).
     """
-    from graspsim.executor import Executor
+    from graspsim.runtime.executor import Executor
 
     if args.address is not None and args.backend != "ray":
         raise ValueError("--address needs --backend ray")
@@ -43,7 +43,7 @@ def add_object_args(p: argparse.ArgumentParser, default: str | None = "test",
                     positional: bool = False) -> None:
     """``--objects SET`` (or a positional ``SET``), ``--object-scale``, ``--object-mass`` and
     ``--decompose``: one object-set syntax on every command
-    (:func:`graspsim.object_sets.parse_object_set`)."""
+    (:func:`graspsim.sim.object_sets.parse_object_set`)."""
     names = ["objects"] if positional else ["--objects"]
     extra = {"nargs": "?"} if positional else {}
     p.add_argument(*names, default=default, metavar="SET", **extra,
@@ -65,9 +65,9 @@ def add_object_args(p: argparse.ArgumentParser, default: str | None = "test",
 
 
 def add_scene_arg(p: argparse.ArgumentParser) -> None:
-    """``--scene drop|isolated|packed|pile`` (:mod:`graspsim.scenes`), one definition for every
+    """``--scene drop|isolated|packed|pile`` (:mod:`graspsim.sim.layouts`), one definition for every
     command that builds scenes."""
-    from graspsim.scenes import SCENES
+    from graspsim.sim.layouts import SCENES
 
     p.add_argument("--scene", default="drop", choices=list(SCENES),
                    help="how objects are put on the table: drop (default: dropped one by one "
@@ -79,7 +79,7 @@ def add_scene_arg(p: argparse.ArgumentParser) -> None:
 def objects_per_scene(args: argparse.Namespace, clutter: bool = False) -> int:
     """``--objects-per-scene``, or its default: 5 for ``--scene packed|pile`` (and for
     ``clutter``, the declutter rounds), else 1."""
-    from graspsim.scenes import default_objects_per_scene
+    from graspsim.sim.layouts import default_objects_per_scene
 
     k = args.objects_per_scene
     if k is None:
@@ -90,9 +90,9 @@ def objects_per_scene(args: argparse.Namespace, clutter: bool = False) -> int:
 
 
 def add_gripper_arg(p: argparse.ArgumentParser) -> None:
-    """``--gripper builtin|franka|wsg50|robotiq-2f85`` (:mod:`graspsim.hands`), one
+    """``--gripper builtin|franka|wsg50|robotiq-2f85`` (:mod:`graspsim.sim.hands`), one
     definition for every command that executes grasps."""
-    from graspsim.hands import HAND_NAMES
+    from graspsim.sim.hands import HAND_NAMES
 
     p.add_argument("--gripper", default="builtin", choices=list(HAND_NAMES),
                    help="the hand: builtin (default: graspsim's parallel jaw, 8 cm stroke), "
@@ -105,9 +105,9 @@ def add_gripper_arg(p: argparse.ArgumentParser) -> None:
 
 
 def object_set_from_args(args: argparse.Namespace):
-    """The :class:`graspsim.object_sets.ObjectSet` that :func:`add_object_args` describes
+    """The :class:`graspsim.sim.object_sets.ObjectSet` that :func:`add_object_args` describes
     (None when ``--objects`` was not given and has no default)."""
-    from graspsim.object_sets import parse_object_set
+    from graspsim.sim.object_sets import parse_object_set
 
     if args.objects is None:
         if args.object_scale != 1.0 or args.object_mass is not None or args.decompose:

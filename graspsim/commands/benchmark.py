@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from graspsim.detector_options import add_detector_arguments
+from graspsim.detectors.dlsr_options import add_detector_arguments
 
 from . import add_executor_args, executor_from_args
 
@@ -50,7 +50,7 @@ def register(subparsers) -> None:
 
 
 def _recognition(args: argparse.Namespace) -> int:
-    from graspsim.benchmarks import recognition_benchmark
+    from graspsim.eval.offline.recognition import recognition_benchmark
 
     summary = recognition_benchmark(
         data=args.data, format=args.format, scale=args.scale, mapping=args.mapping,
@@ -156,8 +156,8 @@ def _register_detection(sub) -> None:
 
 
 def _ggcnn(args: argparse.Namespace) -> int:
-    from graspsim.detector_options import options_from_args
-    from graspsim.ggcnn.evaluate import ggcnn_detection_benchmark
+    from graspsim.detectors.dlsr_options import options_from_args
+    from graspsim.eval.offline.ggcnn import ggcnn_detection_benchmark
 
     network = args.detector
     if network == "ggcnn":  # the options of GG-CNN's earlier runs (the same fold models)
@@ -190,8 +190,8 @@ def _ggcnn(args: argparse.Namespace) -> int:
 
 
 def _detection(args: argparse.Namespace) -> int:
-    from graspsim.benchmarks import detection_benchmark
-    from graspsim.detector_options import options_from_args
+    from graspsim.detectors.dlsr_options import options_from_args
+    from graspsim.eval.offline.detection import detection_benchmark
 
     if args.detector in ("ggcnn", "grconvnet"):
         return _ggcnn(args)

@@ -31,7 +31,7 @@ def register(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from graspsim.compare import compare_folders, comparison_text
+    from graspsim.eval.compare import compare_folders, comparison_text
 
     comparisons = compare_folders(args.folders, alpha=args.alpha)
     print("\n\n".join(comparison_text(c) for c in comparisons))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from graspsim.profiles import PROFILES
+from graspsim.sim.profiles import PROFILES
 
 from . import (
     add_executor_args,
@@ -51,8 +51,8 @@ def register(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from graspsim.datagen import make_dataset
-    from graspsim.execution import ExecutionParams
+    from graspsim.data.datagen import make_dataset
+    from graspsim.sim.execution import ExecutionParams
 
     k = objects_per_scene(args)
     s = make_dataset(n_scenes=args.scenes, objects=object_set_from_args(args), out=args.out,

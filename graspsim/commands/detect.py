@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from graspsim.detector_options import add_detector_arguments
+from graspsim.detectors.dlsr_options import add_detector_arguments
 
 
 def register(subparsers) -> None:
@@ -47,7 +47,7 @@ def register(subparsers) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from dlsr.detection import detect_files
-    from graspsim.detector_options import build_real_detector, options_from_args
+    from graspsim.detectors.dlsr_options import build_real_detector, options_from_args
 
     opts = options_from_args(args)
     K = args.camera

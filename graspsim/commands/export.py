@@ -31,7 +31,7 @@ def register(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from graspsim.export import export_cornell
+    from graspsim.data.export import export_cornell
 
     s = export_cornell(args.data, args.out, keep_empty=args.keep_empty, inpaint=args.inpaint)
     left = (f"; {len(s['skipped'])} left out ("

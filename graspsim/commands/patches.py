@@ -32,7 +32,7 @@ def register(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from graspsim.datagen import make_patches
+    from graspsim.data.datagen import make_patches
 
     k = objects_per_scene(args)
     s = make_patches(n=args.n, out=args.out, objects=object_set_from_args(args), seed=args.seed,

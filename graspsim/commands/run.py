@@ -28,7 +28,7 @@ def register(subparsers) -> None:
     p.add_argument("--backend", choices=["loky", "ray"], default=None)
     p.add_argument("--address", default=None, help="Ray cluster HOST:PORT (with --backend ray)")
     p.add_argument("--jobs", type=int, default=None, help="parallel workers")
-    from graspsim.detector_options import add_detector_arguments
+    from graspsim.detectors.dlsr_options import add_detector_arguments
 
     add_detector_arguments(p, preset=False)  # override the config's settings of these names
     p.set_defaults(func=_main)
@@ -41,7 +41,7 @@ def _main(args: argparse.Namespace) -> int:
     if args.resume:
         folder = args.resume
     else:
-        from graspsim.detector_options import OPTION_NAMES
+        from graspsim.detectors.dlsr_options import OPTION_NAMES
 
         config = load_config(args.config, quick=args.quick, name=args.name, seed=args.seed,
                              backend=args.backend, address=args.address, jobs=args.jobs,

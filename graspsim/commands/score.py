@@ -31,7 +31,7 @@ def register(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from graspsim.scoring import score_predictions
+    from graspsim.eval.scoring import score_predictions
 
     s = score_predictions(args.data, args.predictions, out=args.out, format=args.format,
                           top_k=args.top_k, executor=executor_from_args(args),

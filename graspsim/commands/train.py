@@ -82,7 +82,7 @@ def _report(args, meta: dict, title: str) -> int:
 
 
 def _ggcnn(args: argparse.Namespace) -> int:
-    from graspsim.ggcnn.train import train_from_folder
+    from graspsim.detectors.ggcnn.train import train_from_folder
 
     meta = train_from_folder(args.data, args.format, args.out, scale=args.scale,
                              mapping=args.mapping, **_options(args))
@@ -90,7 +90,7 @@ def _ggcnn(args: argparse.Namespace) -> int:
 
 
 def _grconvnet(args: argparse.Namespace) -> int:
-    from graspsim.ggcnn.train import train_from_folder
+    from graspsim.detectors.ggcnn.train import train_from_folder
 
     meta = train_from_folder(args.data, args.format, args.out, scale=args.scale,
                              mapping=args.mapping, network="grconvnet",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from graspsim.profiles import PROFILES
+from graspsim.sim.profiles import PROFILES
 
 from . import (
     add_executor_args,
@@ -86,8 +86,8 @@ def register(subparsers) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from graspsim.execution import ExecutionParams
-    from graspsim.trials import TrialConfig, run_trials
+    from graspsim.eval.trials import TrialConfig, run_trials
+    from graspsim.sim.execution import ExecutionParams
 
     k = objects_per_scene(args, clutter=args.declutter)
     if args.n < 0:
@@ -115,7 +115,7 @@ def _run(args: argparse.Namespace) -> int:
                   params=params, executor=executor, detector_name=name,
                   detector_options=options or None)
     if args.declutter:
-        from graspsim.declutter import run_rounds
+        from graspsim.eval.declutter import run_rounds
 
         if args.labels is not None:
             raise ValueError("--labels: clutter rounds label every observation of a round, "

@@ -81,7 +81,7 @@ def obs_files(saved_model, tmp_path):
 @pytest.fixture(scope="session")
 def easy_objects():
     """A few graspable test-split objects (kept short for CI)."""
-    from graspsim.objects import builtin_objects
+    from graspsim.sim.objects import builtin_objects
 
     names = {"can_tall", "box_matches", "toothbrush", "bottle_shampoo"}
     specs = [s for s in builtin_objects("all") if s.name in names]

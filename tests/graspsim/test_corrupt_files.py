@@ -517,7 +517,7 @@ def test_dataset_corrupt_records(tmp_path, capsys, name, content):
 
 @pytest.fixture(scope="module")
 def one_scene_dataset(tmp_path_factory):
-    from graspsim.datagen import make_dataset
+    from graspsim.data.datagen import make_dataset
 
     root = tmp_path_factory.mktemp("data") / "ds"
     make_dataset(n_scenes=1, objects="test", out=root, seed=1, n_candidates=2)

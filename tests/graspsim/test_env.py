@@ -90,7 +90,7 @@ def test_declutter_removes_grasped_objects():
 
 def test_execution_parameters_reach_labels_and_grasps(monkeypatch):
     import graspsim.env as genv
-    from graspsim.execution import ExecutionParams
+    from graspsim.sim.execution import ExecutionParams
 
     with pytest.raises(TypeError, match="ExecutionParams"):
         genv.GraspEnv(execution={"min_grip": 0.01})

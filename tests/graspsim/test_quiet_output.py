@@ -1,5 +1,5 @@
 """stdout carries only what a command means to print: pybullet's C banners (``pybullet build
-time: ...`` at import, ``argv[0]=`` at connect) are silenced in graspsim.sim."""
+time: ...`` at import, ``argv[0]=`` at connect) are silenced in graspsim.sim.bullet."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def test_trials_stdout_is_only_the_summary_line(tmp_path):
 
 @pytest.mark.sim
 def test_connect_restores_stdout_and_keeps_its_order(tmp_path):
-    code = ("import graspsim.sim as s\nprint('before', flush=True)\nc = s.connect()\n"
+    code = ("import graspsim.sim.bullet as s\nprint('before', flush=True)\nc = s.connect()\n"
             "print('after')\nc.disconnect()\nimport os\nos.write(1, b'raw\\n')\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120, cwd=tmp_path)
