@@ -18,7 +18,8 @@ The README's row for pybullet_data's ``random_urdfs`` test split (isolated objec
    flag (:mod:`graspsim.labels.graspability`, computed and cached when missing) marks not graspable:
    ``<out>/<objects>/table.json`` and ``table.md``.
 
-Nothing is chosen on the trial objects: every setting is the default job's.
+Nothing is chosen on the trial objects: every setting is the default job's
+(:mod:`graspsim.pipeline.campaigns`).
 """
 
 from __future__ import annotations
@@ -27,16 +28,8 @@ import argparse
 import json
 import logging
 import sys
-from pathlib import Path
 
-from graspsim.eval.compare import compare_outcomes
-from graspsim.eval.stats import wilson_interval
-from graspsim.eval.trials import TrialConfig, run_trials
-from graspsim.pipeline import RunConfig, run_job, trial_detector
-from graspsim.runtime.executor import Executor
-from graspsim.sim.object_sets import parse_object_set
-
-DETECTORS = ("dlsr", "dlsr-paper", "mask-pca", "oracle")
+from graspsim.pipeline.campaigns import DETECTORS, object_set_campaign, table_markdown, table_only
 
 
 def main(argv=None) -> int:
@@ -56,94 +49,14 @@ def main(argv=None) -> int:
                    help="write the table of the trials finished so far, run nothing")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    out = Path(args.out)
     names = [d.strip() for d in args.detectors.split(",") if d.strip()]
     if args.table_only:
-        print(table_markdown(table_only(out, args.objects, names)))
+        print(table_markdown(table_only(args.out, args.objects, names)))
         return 0
-    config = RunConfig(offline=False, trials=1, baselines=[])  # the model run: 2 jobs
-    model_run = out / "model" if args.model_run is None else Path(args.model_run)
-    model_path = model_run / "model" / "dlsr"
-    if any(n.startswith("dlsr") for n in names):
-        run_job(config, out=model_run)
-    oset = parse_object_set(args.objects)
-    folder = out / args.objects.replace(":", "-").replace("/", "_")
-    executor = Executor(backend="loky" if args.jobs != 1 else "sequential", n_jobs=args.jobs,
-                        progress=True)
-    trial_cfg = TrialConfig(n_candidates=config.trial_candidates, sampler=config.label_sampler)
-    for name in names:
-        run_trials(trial_detector(name, model_path, config), objects=oset, n=args.n,
-                   seed=args.seed, out=folder / name, config=trial_cfg, executor=executor,
-                   progress=True, detector_name=name, labels=folder / "labels")
-    table = trial_table(folder, names, oset, args.graspability)
-    (folder / "table.json").write_text(json.dumps(table, indent=1) + "\n")
-    (folder / "table.md").write_text(table_markdown(table))
+    table = object_set_campaign(args.objects, args.n, args.seed, args.out, names,
+                                args.model_run, args.jobs, args.graspability)
     print(json.dumps(table, indent=1))
     return 0
-
-
-def trial_table(folder: Path, names, oset, compute: bool) -> dict:
-    """Success, intervals, paired verdicts against mask-pca and the not-graspable check, on
-    the trial indices every detector has finished (all of them once the runs are complete)."""
-    from graspsim.labels.graspability import graspability_flags
-
-    flags = graspability_flags(oset, compute=compute, partial=not compute)
-    recs = {}
-    for name in names:
-        path = folder / name / "trials.jsonl"
-        recs[name] = {r["index"]: r for r in map(json.loads, path.open()) if r}
-    common = sorted(set.intersection(*(set(r) for r in recs.values())))
-    rows = []
-    for name in names:
-        out = [bool(recs[name][i]["success"]) for i in common]
-        k, n = sum(out), len(out)
-        row = {"detector": name, "successes": k, "n": n, "rate": k / n if n else None,
-               "ci95": list(wilson_interval(k, n))}
-        if name != "mask-pca" and "mask-pca" in recs and n:
-            c = compare_outcomes(out, [bool(recs["mask-pca"][i]["success"]) for i in common],
-                                 names=(name, "mask-pca"))
-            row["vs_mask_pca"] = {k_: c[k_] for k_ in ("n", "counts", "difference",
-                                                       "difference_ci", "mcnemar_p", "better")}
-        objs = [recs[name][i]["object"] for i in common]
-        known = [i for i, o in zip(common, objs, strict=True)
-                 if flags is not None and all(x in flags for x in o)]
-        bad = [i for i in known if not all(flags[x] for x in recs[name][i]["object"])]
-        row["trials_with_flags"] = len(known)
-        row["not_graspable_trials"] = len(bad)
-        row["not_graspable_successes"] = sum(bool(recs[name][i]["success"]) for i in bad)
-        rows.append(row)
-    return {"objects": oset.text, "fingerprint": oset.fingerprint(), "indices": len(common),
-            "rows": rows, "flags": None if flags is None else {
-                "n_objects": len(flags), "graspable": sum(flags.values())}}
-
-
-def table_markdown(t: dict) -> str:
-    lines = [f"Object set `{t['objects']}` (fingerprint {t['fingerprint'][:12]}), "
-             f"{t['indices']} paired trials", "",
-             "| detector | success | 95 % interval | vs mask-pca (paired, Newcombe 95 %, exact "
-             "McNemar) | successes on objects not graspable by physics |",
-             "|---|---|---|---|---|"]
-    for r in t["rows"]:
-        lo, hi = r["ci95"]
-        v = r.get("vs_mask_pca")
-        verdict = "" if v is None else (
-            f"{100 * v['difference']:+.1f} [{100 * v['difference_ci'][0]:+.1f}, "
-            f"{100 * v['difference_ci'][1]:+.1f}], p = {v['mcnemar_p']:.2g}")
-        ng = (f"{r['not_graspable_successes']}/{r['not_graspable_trials']} "
-              f"({r['trials_with_flags']} trials with a flag)")
-        lines.append(f"| {r['detector']} | {r['successes']}/{r['n']} = {100 * r['rate']:.1f} % "
-                     f"| [{100 * lo:.1f}, {100 * hi:.1f}] | {verdict} | {ng} |")
-    return "\n".join(lines) + "\n"
-
-
-def table_only(out: Path, objects: str, names) -> dict:
-    """The table of finished trials (no new trial)."""
-    oset = parse_object_set(objects)
-    folder = out / objects.replace(":", "-").replace("/", "_")
-    table = trial_table(folder, names, oset, False)
-    (folder / "table.json").write_text(json.dumps(table, indent=1) + "\n")
-    (folder / "table.md").write_text(table_markdown(table))
-    return table
 
 
 if __name__ == "__main__":

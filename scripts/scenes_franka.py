@@ -9,7 +9,8 @@ Three rows, each on the built-in test objects, every detector on the same seeded
 
 DLSR is the default job's model (``graspsim run`` with the defaults writes it to
 ``model/dlsr``, and ``model/dlsr-paper`` for the paper's configuration): it is trained here by
-:func:`graspsim.pipeline.run_job` with the default configuration, without the offline
+:func:`graspsim.pipeline.run_job` with the default configuration
+(:mod:`graspsim.pipeline.campaigns`), without the offline
 benchmarks (which do not change the model) and with one trial per detector, in
 ``OUT/model-run``. Nothing is chosen on these scenes.
 
@@ -32,29 +33,15 @@ import argparse
 import logging
 from pathlib import Path
 
-from graspsim.eval.comparison_grid import Row, grow, pick
-
-ROWS = {"pile": Row("pile", scene="pile"), "packed": Row("packed", scene="packed"),
-        "franka": Row("franka", hand="franka")}
-DETECTORS = ("dlsr", "dlsr-paper", "mask-pca", "oracle")
-CANDIDATES = 32  # labels per observation for the oracle (the default job's trial_candidates)
-
-
-def model(out: Path, jobs: int) -> tuple[Path, object]:
-    """Train (or find) the default job's models; returns the DLSR model path and the config."""
-    from graspsim.pipeline import RunConfig, run_job
-
-    cfg = RunConfig(offline=False, trials=1, baselines=[], jobs=jobs)
-    root = out / "model-run"
-    run_job(cfg, out=root, progress=False)
-    return root / "model" / "dlsr", cfg
+from graspsim.eval.comparison_grid import pick
+from graspsim.pipeline.campaigns import DETECTORS, PEER_ROWS, peer_protocol_campaign
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True, type=Path)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--rows", default=",".join(ROWS))
+    ap.add_argument("--rows", default=",".join(PEER_ROWS))
     ap.add_argument("--detectors", default=",".join(DETECTORS),
                     help="run only these (the model is trained only for dlsr, dlsr-paper)")
     ap.add_argument("--steps", type=int, default=None,
@@ -62,21 +49,11 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     try:
-        rows = pick(args.rows, ROWS, "rows")
+        rows = pick(args.rows, PEER_ROWS, "rows")
         dets = pick(args.detectors, DETECTORS, "detectors")
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
-    from graspsim.pipeline import trial_detector
-    from graspsim.runtime.executor import Executor
-
-    args.out.mkdir(parents=True, exist_ok=True)
-    model_path, cfg = (model(args.out, args.jobs) if {"dlsr", "dlsr-paper"} & set(dets)
-                       else (None, None))
-    ex = Executor(backend="loky" if args.jobs != 1 else "sequential", n_jobs=args.jobs,
-                  progress=False)
-    grow([ROWS[r] for r in rows], dets,
-         lambda name, row: trial_detector(name, model_path, cfg, hand=row.hand),
-         args.out, executor=ex, steps=args.steps, candidates=CANDIDATES)
+    peer_protocol_campaign(args.out, rows, dets, args.jobs, args.steps)
     return 0
 
 
