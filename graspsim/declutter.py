@@ -36,6 +36,7 @@ from .execution import ExecutionParams
 from .scene import TABLE_HALF_SIZE, PlacedObject, Scene, build_scene, link_pose, settle
 from .trials import (
     NO_PROPOSAL,
+    SceneError,
     TrialConfig,
     _campaign,
     _campaign_setup,
@@ -48,6 +49,8 @@ from .trials import (
     observe_scene,
     planning_stats,
     profile_capture,
+    skipped_line,
+    skipped_record,
     wilson_interval,
 )
 
@@ -210,7 +213,10 @@ def run_round(sim, specs, detector, seed: int, index: int,
 
 
 def _round_task(specs, detector, seed, index, config, params):
-    return run_round(_worker_sim(), specs, detector, seed, index, config, params)
+    try:
+        return run_round(_worker_sim(), specs, detector, seed, index, config, params)
+    except SceneError as exc:
+        return skipped_record(seed, index, exc)
 
 
 def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, out=None,
@@ -340,7 +346,7 @@ def rounds_markdown(s: dict) -> str:
         f"- rectangle-metric accuracy of the executed grasps: {pct(s['metric_accuracy'])} "
         f"(n = {s['metric_n']})",
         _planning_line(s.get("planning_seconds")),
-        *filter(None, [_execution_line(s)]),
+        *filter(None, [_execution_line(s), skipped_line(s)]),
         "",
         "| round ended by | rounds |",
         "|---|---|",

@@ -124,7 +124,8 @@ def render_html(blocks, base: Path, title: str) -> str:
 def _trial_records(root: Path, name: str) -> list[dict]:
     from dlsr.records import read_jsonl
 
-    return sorted(read_jsonl(root / "trials" / name / "trials.jsonl"), key=lambda r: r["index"])
+    return sorted((r for r in read_jsonl(root / "trials" / name / "trials.jsonl")
+                   if "skipped" not in r), key=lambda r: r["index"])
 
 
 def _mosaic(root: Path, pics: Path) -> str | None:

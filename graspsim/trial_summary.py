@@ -8,7 +8,7 @@ import numpy as np
 
 from .execution import describe_changes, execution_changes, execution_params_from_dict
 
-__all__ = ["wilson_interval", "planning_stats", "summarize", "summary_markdown"]
+__all__ = ["wilson_interval", "planning_stats", "summarize", "summary_markdown", "skipped_line"]
 
 
 def wilson_interval(k: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -104,7 +104,7 @@ def summary_markdown(s: dict) -> str:
         f"- trials per second (this run): {tps} with {s.get('n_jobs')} job(s); "
         f"mean {s['seconds_per_trial'] or 0:.2f} s per trial per worker",
         _planning_line(s.get("planning_seconds")),
-        *filter(None, [_execution_line(s)]),
+        *filter(None, [_execution_line(s), skipped_line(s)]),
         "",
         "| rectangle metric \\ physics | success | failure |",
         "|---|---|---|",
@@ -118,6 +118,18 @@ def summary_markdown(s: dict) -> str:
     lines += ["", "| object | successes | trials |", "|---|---|---|"]
     lines += [f"| {k} | {v['successes']} | {v['n']} |" for k, v in s["per_object"].items()]
     return "\n".join(lines) + "\n"
+
+
+def skipped_line(s: dict) -> str | None:
+    """The summary line listing the scenes that could not be made (``s["skipped"]``, each
+    ``index`` and ``reason``), or None when there is none."""
+    skipped = s.get("skipped") or []
+    if not skipped:
+        return None
+    shown = ", ".join(str(x["index"]) for x in skipped[:20])
+    more = f" and {len(skipped) - 20} more" if len(skipped) > 20 else ""
+    return (f"- skipped: {len(skipped)} scene(s) that could not be made (indices {shown}{more};"
+            f" first reason: {skipped[0]['reason']}); the figures above leave them out")
 
 
 def _planning_line(p) -> str:

@@ -79,6 +79,7 @@ from .trial_summary import (  # noqa: F401 (public here, as before)
     _execution_line,
     _planning_line,
     planning_stats,
+    skipped_line,
     summarize,
     summary_markdown,
     wilson_interval,
@@ -98,9 +99,30 @@ __all__ = [
     "propose",
     "planning_stats",
     "campaign_execution_params",
+    "SceneError",
+    "skipped_record",
+    "is_skipped",
 ]
 
 log = logging.getLogger(__name__)
+
+
+class SceneError(ValueError):
+    """A seeded scene that cannot be made (objects that never come to rest, a pile that never
+    settles). It is the same scene for every detector, so a campaign records it as a skip
+    (:func:`skipped_record`) and pairs detectors on the scenes that were made."""
+
+
+def skipped_record(seed: int, index: int, error: Exception) -> dict:
+    """The record a campaign keeps for trial or round ``index`` whose scene could not be
+    made: ``index``, ``seed`` and ``skipped`` (the reason). Logged as a warning."""
+    log.warning("%s: skipped", error)
+    return {"index": index, "seed": seed, "skipped": str(error)}
+
+
+def is_skipped(record: dict) -> bool:
+    """Whether a trial or round record is a skip (:func:`skipped_record`)."""
+    return "skipped" in record
 
 NO_PROPOSAL = "no grasp proposed"
 
@@ -248,7 +270,7 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile
 
     Raises
     ------
-    ValueError
+    SceneError
         When the scene cannot be made (:func:`graspsim.scene.make_scene`); the message names
         the scene's index and seed.
     """
@@ -260,7 +282,7 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile
         placed = make_scene_of(scene, sim, specs, st["scene"], n_objects=n_objects,
                                table=prof.table)
     except ValueError as exc:
-        raise ValueError(f"scene {index} of seed {seed}: {exc}") from None
+        raise SceneError(f"scene {index} of seed {seed}: {exc}") from None
     bodies = build_scene(sim, placed)
     frame = profile_capture(sim, placed, bodies, st["camera"], prof)
     return placed, bodies, frame, st
@@ -490,8 +512,11 @@ def _label_and_propose(sim, scene, frame, bodies, streams, detector, config, par
 
 
 def _trial_task(specs, detector, seed, index, config, params, known=None, share=False):
-    return run_trial(_worker_sim(), specs, detector, seed, index, config, params, known=known,
-                     share=share)
+    try:
+        return run_trial(_worker_sim(), specs, detector, seed, index, config, params,
+                         known=known, share=share)
+    except SceneError as exc:
+        return skipped_record(seed, index, exc)
 
 
 def read_done(path: Path) -> dict[int, dict]:
@@ -703,7 +728,9 @@ def _campaign(task, unit: str, meta: dict, out, n: int, args: list, executor, n_
     i, config, params``, then what ``item_args`` gives item ``i``, when given); ``on_record``
     sees each new record before it is kept (:func:`_run_missing`); records go to
     ``out/<unit>.jsonl`` as they come, the summary of
-    ``summarize_fn(records)`` (with ``meta``, ``<unit>_per_second`` and ``n_jobs``) to
+    ``summarize_fn(records)`` over the items whose scene was made (with ``meta``, ``skipped``
+    (index and reason of each item whose scene could not be made), ``<unit>_per_second`` and
+    ``n_jobs``) to
     ``summary.json`` and ``markdown_fn(summary)`` to ``summary.md``.
     """
     out, jsonl, done = _open_campaign(out, meta, f"{unit}.jsonl")
@@ -717,8 +744,11 @@ def _campaign(task, unit: str, meta: dict, out, n: int, args: list, executor, n_
                        on_record)
     wall = time.perf_counter() - t0
     records = [done[i] for i in sorted(done) if i < n]
+    skipped = [{"index": r["index"], "reason": r["skipped"]} for r in records if is_skipped(r)]
+    records = [r for r in records if not is_skipped(r)]
     summary = summarize_fn(records)
     summary.update(meta)
+    summary["skipped"] = skipped
     summary[f"{unit}_per_second"] = (new / wall) if new and wall > 0 else None
     summary["n_jobs"] = n_jobs if executor is None else executor.n_jobs
     if out is not None:
