@@ -10,7 +10,9 @@ The learned detectors are the data-efficiency curve's models at 300 training sce
 validation chose, all trained on the same 300 scenes of the built-in train objects); nothing
 is chosen on these scenes. DLSR and GG-CNN are made aware of each row's hand
 (:func:`graspsim.detectors.gripper_aware`), as in the curve; the paper's DLSR runs its dense
-search as the paper does.
+search as the paper does. ``dlsr-hand`` is DLSR with the training data chosen for the row's
+hand on validation scenes of the YCB train objects (``scripts/hands_dlsr_choice.py``,
+``results/hand-choice``); it is a default column once that choice has been made.
 
 The cells grow in steps (25, 50, 100, 150, 200 trials; 6 ... 200 rounds), so whatever has
 finished when the script is stopped covers every cell; a rerun resumes. ``OUT/results.json``
@@ -36,6 +38,7 @@ HANDS = ("builtin", "franka", "wsg50", "robotiq-2f85")
 CLUTTER = tuple(f"{scene}-{hand}" for hand in ("franka", "robotiq-2f85")
                 for scene in ("pile", "packed"))
 DETECTORS = ("dlsr", "dlsr-paper", "ggcnn+aware", "mask-pca", "oracle")
+CHOICE = REPO / "results" / "hand-choice"
 SIZE = 300  # the curve's training scenes
 
 
@@ -67,6 +70,10 @@ def make_detector(name: str, row: Row, curve: Path = CURVE):
     if name == "dlsr":
         det = DLSRDetector.load(curve / "models" / f"dlsr_{SIZE}").detector("lattice")
         return gripper_aware(det, hand=row.hand)
+    if name == "dlsr-hand":
+        from graspsim.eval.hand_choice import chosen_detector
+
+        return chosen_detector(CHOICE, row.hand)
     if name == "dlsr-paper":
         return DLSRDetector.load(curve / "models" / f"dlsr-paper_{SIZE}").detector("dense")
     if name == "ggcnn+aware":
@@ -81,7 +88,9 @@ def main(argv=None) -> int:
     ap.add_argument("--objects", default="ycb:test")
     ap.add_argument("--out", type=Path, default=REPO / "results" / "hands-ycb")
     ap.add_argument("--rows", default=",".join(HANDS + CLUTTER))
-    ap.add_argument("--detectors", default=",".join(DETECTORS))
+    chosen = (CHOICE / "choice.json").is_file()
+    ap.add_argument("--detectors",
+                    default=",".join(DETECTORS + (("dlsr-hand",) if chosen else ())))
     ap.add_argument("--steps", type=int, default=None,
                     help="growth steps to run (default: all, up to 200 trials and rounds)")
     ap.add_argument("--jobs", type=int, default=2)
@@ -90,7 +99,7 @@ def main(argv=None) -> int:
     table = rows(args.objects)
     try:
         names = pick(args.rows, table, "rows")
-        dets = pick(args.detectors, DETECTORS, "detectors")
+        dets = pick(args.detectors, DETECTORS + ("dlsr-hand",), "detectors")
     except ValueError as exc:
         raise SystemExit(str(exc)) from None
     from graspsim.runtime.executor import Executor

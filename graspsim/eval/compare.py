@@ -180,7 +180,8 @@ def load_folder(folder) -> dict:
         ``config`` (dict), ``name`` (the detector recorded in the configuration, else the
         folder's name; the configuration's name for an object-wise validation), ``file`` (the
         JSONL path, or ``objectwise.json``) and ``records`` (dict: trial index (int), image id
-        (str) or (fold, trial index) -> record); an object-wise validation also has ``folds``
+        (str) or (fold, trial index) -> record; the scenes that could not be made are left
+        out and counted in ``skipped``); an object-wise validation also has ``folds``
         (each fold's loaded DLSR trial folder).
     """
     folder = Path(folder)
@@ -204,7 +205,11 @@ def load_folder(folder) -> dict:
     if not jsonl.exists():
         raise FileNotFoundError(f"{jsonl} is missing: {folder} holds no {kind}")
     records: dict = {}
+    skipped = 0
     for number, rec in enumerate(read_jsonl(jsonl), start=1):
+        if "skipped" in rec:  # a scene that could not be made: no outcome to pair
+            skipped += 1
+            continue
         if kind == "rounds":
             rec = _first_grasp(rec, jsonl, number)
         if key not in rec or "success" not in rec:
@@ -225,7 +230,7 @@ def load_folder(folder) -> dict:
         raise ValueError(f"{jsonl}: no records")
     name = str(config.get("detector") or config.get("name") or folder.name)
     return {"folder": folder, "kind": kind, "config": config, "name": name, "file": jsonl,
-            "records": records}
+            "records": records, "skipped": skipped}
 
 
 def first_grasp(record: dict) -> bool:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from dlsr.records import read_jsonl, write_json_atomic, write_text_atomic
 
+from ..runtime.campaign import is_skipped
 from ..sim.execution import ExecutionParams
 from .compare import compare_outcomes, first_grasp
 from .declutter import run_rounds, summarize_rounds
@@ -121,11 +122,17 @@ def run_cell(row: Row, name: str, detector, n: int, out, executor=None, seed: in
     return s
 
 
-def _records(folder: Path, unit: str) -> dict[int, dict]:
+def _records(folder: Path, unit: str) -> tuple[dict[int, dict], set[int]]:
+    """A cell's records by index, and the indices of scenes that could not be made (they
+    pair with nothing)."""
     out: dict[int, dict] = {}
+    skipped: set[int] = set()
     for r in read_jsonl(folder / f"{unit}.jsonl", required=("index",)):
-        out.setdefault(int(r["index"]), r)
-    return out
+        if is_skipped(r):
+            skipped.add(int(r["index"]))
+        else:
+            out.setdefault(int(r["index"]), r)
+    return out, skipped
 
 
 def _reasons(records) -> dict:
@@ -143,7 +150,8 @@ def row_results(out, row: Row, detectors: Sequence[str], reference: str = "mask-
     Returns
     -------
     dict
-        ``unit``, ``n`` (paired scenes), ``objects``, ``hand``, ``scene`` and ``cells``:
+        ``unit``, ``n`` (paired scenes), ``skipped`` (indices of scenes that could not be
+        made, left out of every cell), ``objects``, ``hand``, ``scene`` and ``cells``:
         per detector its successes, rate and Wilson interval, failure reasons (trials), or
         grasp success, declutter rate with its bootstrap interval and first-grasp success
         (rounds), and ``vs_reference`` (exact McNemar p, which is better, verdict; for rounds
@@ -151,10 +159,12 @@ def row_results(out, row: Row, detectors: Sequence[str], reference: str = "mask-
     """
     out = Path(out)
     unit = row.unit
-    recs = {d: _records(out / row.name / d, unit) for d in detectors}
+    read = {d: _records(out / row.name / d, unit) for d in detectors}
+    recs = {d: r for d, (r, _) in read.items()}
     shared = sorted(set.intersection(*(set(r) for r in recs.values()))) if recs else []
-    res: dict = {"unit": unit, "n": len(shared), "objects": row.objects, "hand": row.hand,
-                 "scene": row.scene, "reference": reference, "cells": {}}
+    skipped = sorted(set().union(*(s for _, s in read.values())))
+    res: dict = {"unit": unit, "n": len(shared), "skipped": skipped, "objects": row.objects,
+                 "hand": row.hand, "scene": row.scene, "reference": reference, "cells": {}}
     if not shared:
         return res
     for d in detectors:
@@ -220,6 +230,9 @@ def results_markdown(results: dict) -> str:
                                                            if res["scene"] else "")
         ref = res.get("reference", "mask-pca")
         lines += [f"## {name} ({res['n']} paired {res['unit']}; {where})", ""]
+        if res.get("skipped"):
+            lines += [f"Left out: {len(res['skipped'])} scene(s) that could not be made "
+                      f"(indices {', '.join(map(str, res['skipped']))}).", ""]
         if res["unit"] == "trials":
             lines += [f"| detector | success | 95 % CI | vs {ref} (exact McNemar) | failures |",
                       "|---|---|---|---|---|"]

@@ -33,13 +33,13 @@ import time
 
 import numpy as np
 
-from ..runtime.campaign import run_campaign
+from ..runtime.campaign import run_campaign, skipped_record
 from ..sim.bullet import worker_sim
 from ..sim.execution import ExecutionParams
-from ..sim.observe import observe_scene, profile_capture
+from ..sim.observe import SceneError, observe_scene, profile_capture
 from ..sim.scene import build_scene, scene_after_grasp
 from .stats import bootstrap_ratio_interval, wilson_interval
-from .summary import execution_line, planning_line, planning_stats
+from .summary import execution_line, planning_line, planning_stats, skipped_line
 from .trials import (
     NO_PROPOSAL,
     TrialConfig,
@@ -148,7 +148,10 @@ def run_round(sim, specs, detector, seed: int, index: int,
 
 
 def _round_task(specs, detector, seed, index, config, params):
-    return run_round(worker_sim(), specs, detector, seed, index, config, params)
+    try:
+        return run_round(worker_sim(), specs, detector, seed, index, config, params)
+    except SceneError as exc:
+        return skipped_record(index, exc, seed=seed)
 
 
 def run_rounds(detector="mask-pca", objects="test", n: int = 20, seed: int = 0, out=None,
@@ -252,7 +255,7 @@ def rounds_markdown(s: dict) -> str:
         f"- rectangle-metric accuracy of the executed grasps: {pct(s['metric_accuracy'])} "
         f"(n = {s['metric_n']})",
         planning_line(s.get("planning_seconds")),
-        *filter(None, [execution_line(s)]),
+        *filter(None, [execution_line(s), skipped_line(s)]),
         "",
         "| round ended by | rounds |",
         "|---|---|",

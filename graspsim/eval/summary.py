@@ -9,7 +9,8 @@ import numpy as np
 from ..sim.execution import describe_changes, execution_changes, execution_params_from_dict
 from .stats import wilson_interval
 
-__all__ = ["planning_stats", "summarize", "summary_markdown", "planning_line", "execution_line"]
+__all__ = ["planning_stats", "summarize", "summary_markdown", "planning_line", "execution_line",
+           "skipped_line"]
 
 
 def planning_stats(seconds) -> dict:
@@ -91,7 +92,7 @@ def summary_markdown(s: dict) -> str:
         f"- trials per second (this run): {tps} with {s.get('n_jobs')} job(s); "
         f"mean {s['seconds_per_trial'] or 0:.2f} s per trial per worker",
         planning_line(s.get("planning_seconds")),
-        *filter(None, [execution_line(s)]),
+        *filter(None, [execution_line(s), skipped_line(s)]),
         "",
         "| rectangle metric \\ physics | success | failure |",
         "|---|---|---|",
@@ -105,6 +106,28 @@ def summary_markdown(s: dict) -> str:
     lines += ["", "| object | successes | trials |", "|---|---|---|"]
     lines += [f"| {k} | {v['successes']} | {v['n']} |" for k, v in s["per_object"].items()]
     return "\n".join(lines) + "\n"
+
+
+def skipped_line(s: dict) -> str | None:
+    """The summary line listing the scenes that could not be made.
+
+    Parameters
+    ----------
+    s : dict
+        A summary with ``skipped`` (each ``index`` and ``reason``).
+
+    Returns
+    -------
+    str or None
+        None when there is none.
+    """
+    skipped = s.get("skipped") or []
+    if not skipped:
+        return None
+    shown = ", ".join(str(x["index"]) for x in skipped[:20])
+    more = f" and {len(skipped) - 20} more" if len(skipped) > 20 else ""
+    return (f"- skipped: {len(skipped)} scene(s) that could not be made (indices {shown}{more};"
+            f" first reason: {skipped[0]['reason']}); the figures above leave them out")
 
 
 def planning_line(p) -> str:

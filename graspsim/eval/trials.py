@@ -52,7 +52,7 @@ from ..detectors.loading import check_detector_options, detector_label, load_det
 from ..labels.graspability import resolve_objects
 from ..labels.labelling import label_rectangles, rank_order, sample_candidates
 from ..labels.store import SceneLabels, candidates_digest, known_positives
-from ..runtime.campaign import run_campaign
+from ..runtime.campaign import run_campaign, skipped_record
 from ..sim.bullet import worker_sim
 from ..sim.execution import (
     ExecutionParams,
@@ -63,7 +63,7 @@ from ..sim.execution import (
 )
 from ..sim.layouts import check_scene
 from ..sim.object_sets import check_same_object_set, object_set_meta
-from ..sim.observe import observation, observe_scene
+from ..sim.observe import SceneError, observation, observe_scene
 from ..sim.scene import build_scene
 from .summary import summarize, summary_markdown
 
@@ -421,8 +421,11 @@ def upgrade_campaign_config(old: dict, meta: dict, path) -> dict:
 
 
 def _trial_task(specs, detector, seed, index, config, params, known=None, share=False):
-    return run_trial(worker_sim(), specs, detector, seed, index, config, params, known=known,
-                     share=share)
+    try:
+        return run_trial(worker_sim(), specs, detector, seed, index, config, params,
+                         known=known, share=share)
+    except SceneError as exc:
+        return skipped_record(index, exc, seed=seed)
 
 
 def campaign_setup(detector, detector_name, objects, n: int, seed: int, config, params,

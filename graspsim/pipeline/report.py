@@ -19,6 +19,7 @@ from dlsr.rectangles import GraspRectangle
 
 from ..eval.compare import compare_pair
 from ..eval.trialviz import save_gif, trial_frames
+from ..runtime.campaign import is_skipped
 from ..sim.bullet import Simulation
 from ..sim.object_sets import parse_object_set
 from ..sim.observe import observe_scene
@@ -133,7 +134,8 @@ def render_html(blocks, base: Path, title: str) -> str:
 
 
 def _trial_records(root: Path, name: str) -> list[dict]:
-    return sorted(read_jsonl(root / "trials" / name / "trials.jsonl"), key=lambda r: r["index"])
+    return sorted((r for r in read_jsonl(root / "trials" / name / "trials.jsonl")
+                   if not is_skipped(r)), key=lambda r: r["index"])
 
 
 def _mosaic(root: Path, pics: Path) -> str | None:

@@ -29,9 +29,47 @@ from dlsr.records import (
 
 from .executor import Executor
 
-__all__ = ["read_done", "open_campaign", "run_missing", "make_executor", "run_campaign"]
+__all__ = ["read_done", "open_campaign", "run_missing", "make_executor", "run_campaign",
+           "skipped_record", "is_skipped"]
 
 log = logging.getLogger(__name__)
+
+
+def skipped_record(index: int, error: Exception, **fields) -> dict:
+    """The record a campaign keeps for an item that could not be run (a scene that could not
+    be made): ``index``, ``fields`` and ``skipped`` (the reason). Logged as a warning.
+
+    A skip is a finished record: a resume does not run the item again, and
+    :func:`run_campaign` leaves it out of the summary's figures and lists it in ``skipped``.
+
+    Parameters
+    ----------
+    index : int
+    error : Exception
+        Its message is the reason.
+    **fields
+        Recorded too (a trial's ``seed``).
+
+    Returns
+    -------
+    dict
+    """
+    log.warning("%s: skipped", error)
+    return {"index": index, **fields, "skipped": str(error)}
+
+
+def is_skipped(record: dict) -> bool:
+    """Whether a record is a skip (:func:`skipped_record`).
+
+    Parameters
+    ----------
+    record : dict
+
+    Returns
+    -------
+    bool
+    """
+    return "skipped" in record
 
 
 def read_done(path) -> dict[int, dict]:
@@ -219,9 +257,11 @@ def run_campaign(task: Callable, unit: str, meta: dict, out, n: int,
     Returns
     -------
     dict
-        ``summarize(records)`` with ``meta``, ``<unit>_per_second`` (None when nothing ran)
-        and ``n_jobs``, also written to ``out/summary.json`` (and ``summary.md``), then
-        ``records`` (sorted by index).
+        ``summarize(records)`` over the items that ran (not the skips,
+        :func:`skipped_record`) with ``meta``, ``skipped`` (``index`` and ``reason`` of each
+        skip), ``<unit>_per_second`` (None when nothing ran) and ``n_jobs``, also written to
+        ``out/summary.json`` (and ``summary.md``), then ``records`` (sorted by index, skips
+        left out).
     """
     out, jsonl, done = open_campaign(out, meta, f"{unit}.jsonl", upgrade)
     todo = [i for i in range(n) if i not in done]
@@ -234,8 +274,11 @@ def run_campaign(task: Callable, unit: str, meta: dict, out, n: int,
                       on_record)
     wall = time.perf_counter() - t0
     records = [done[i] for i in sorted(done) if i < n]
+    skipped = [{"index": r["index"], "reason": r["skipped"]} for r in records if is_skipped(r)]
+    records = [r for r in records if not is_skipped(r)]
     summary = summarize(records)
     summary.update(meta)
+    summary["skipped"] = skipped
     summary[f"{unit}_per_second"] = (new / wall) if new and wall > 0 else None
     summary["n_jobs"] = n_jobs if executor is None else executor.n_jobs
     if out is not None:

@@ -15,7 +15,14 @@ from ..sim.profiles import get_profile
 from .layouts import make_scene_of
 from .scene import build_scene, capture
 
-__all__ = ["trial_streams", "observe_scene", "profile_capture", "observation"]
+__all__ = ["SceneError", "trial_streams", "observe_scene", "profile_capture", "observation"]
+
+
+class SceneError(ValueError):
+    """A seeded scene that cannot be made (objects that never come to rest, a pile that never
+    settles). It is the same scene for every detector, so a campaign records it as a skip
+    (:func:`graspsim.runtime.campaign.skipped_record`) and pairs detectors on the scenes that
+    were made."""
 
 
 def trial_streams(seed: int, index: int) -> dict:
@@ -51,7 +58,7 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile
 
     Raises
     ------
-    ValueError
+    SceneError
         When the scene cannot be made (:func:`graspsim.sim.scene.make_scene`); the message names
         the scene's index and seed.
     """
@@ -61,7 +68,7 @@ def observe_scene(sim, specs, seed: int, index: int, n_objects: int = 1, profile
         placed = make_scene_of(scene, sim, specs, st["scene"], n_objects=n_objects,
                                table=prof.table)
     except ValueError as exc:
-        raise ValueError(f"scene {index} of seed {seed}: {exc}") from None
+        raise SceneError(f"scene {index} of seed {seed}: {exc}") from None
     bodies = build_scene(sim, placed)
     frame = profile_capture(sim, placed, bodies, st["camera"], prof)
     return placed, bodies, frame, st
