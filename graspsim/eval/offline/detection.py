@@ -1,10 +1,18 @@
 """The paper's detection benchmark (Table 2) behind ``graspsim benchmark detection``:
 cross-validated detection accuracy by the rectangle metric, with the baselines on the same
-images and paired tests against them."""
+images and paired tests against them.
+
+:func:`detection_benchmark` runs in named steps: the saved model checked (with ``model``), the
+extra training images, the labelled images, the folds, the configuration (whose digest keys
+the results), the missing fold models trained, the missing test images detected (each fold's
+detector: :func:`_fold_detector`), the summary (:func:`summarize_detection`), the overlays,
+and the model on every image (``save_model``).
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 import logging
@@ -168,11 +176,6 @@ def detection_benchmark(
     :class:`graspsim.runtime.executor.Executor`: local processes or a Ray cluster; sequential when
     None); results are written in image order as they arrive.
 
-    The steps: the saved model checked (with ``model``), the extra training images, the
-    labelled images, the folds, the configuration (whose digest keys the results), the
-    missing fold models trained, the missing test images detected, the summary
-    (:func:`summarize_detection`), the overlays, the model on every image (``save_model``).
-
     Returns
     -------
     dict
@@ -234,14 +237,9 @@ def detection_benchmark(
         _train_fold_models(models, samples, folds, done, extra_samples, training,
                            train_positives, seed, executor)
 
-    def fold_detector(k):
-        fold_model = fixed if model is not None else DLSRDetector.load(_fold_model_path(models, k))
-        if options is not None:
-            return build_real_detector(fold_model, options, region=region, rescore=rescore,
-                                       coarse_to_fine=coarse_to_fine)
-        return _benchmark_detector(fold_model, detector, region, rescore, coarse_to_fine,
-                                   clear_jaws)
-
+    fold_detector = functools.partial(
+        _fold_detector, fixed=fixed, models=models, options=options, detector=detector,
+        region=region, rescore=rescore, coarse_to_fine=coarse_to_fine, clear_jaws=clear_jaws)
     _detect_folds(samples, folds, done, fold_detector, baselines, key, seed, results_path,
                   executor, progress)
     recs = [done[s.image_id] for s in samples]
@@ -403,6 +401,18 @@ def _train_fold_models(models, samples, folds, done, extra_samples, training, tr
              for k in to_train]
     for _ in executor.imap(train_saved, tasks, desc="fold models", star=True):
         pass
+
+
+def _fold_detector(k: int, *, fixed, models, options, detector, region, rescore,
+                   coarse_to_fine, clear_jaws):
+    """Fold ``k``'s detector: the saved model (``fixed``) or the fold's, searched as
+    ``options`` say (:func:`graspsim.detectors.dlsr_options.build_real_detector`) or as the
+    benchmark's own arguments say."""
+    fold_model = fixed if fixed is not None else DLSRDetector.load(_fold_model_path(models, k))
+    if options is not None:
+        return build_real_detector(fold_model, options, region=region, rescore=rescore,
+                                   coarse_to_fine=coarse_to_fine)
+    return _benchmark_detector(fold_model, detector, region, rescore, coarse_to_fine, clear_jaws)
 
 
 def _detect_folds(samples, folds, done, fold_detector, baselines, key, seed, results_path,
