@@ -479,6 +479,7 @@ class DenseDetector(_Base):
             return np.zeros(0)
         pre = dict(self.model.preprocess)
         pre["size"] = SIZE
+        pre["locate"] = "compiled"  # the holes' values up to float rounding, 5 times sooner
         parts = [r for r in np.array_split(rects, self._threads()) if len(r)]
         made = _map(pool, lambda r: rectangle_images(obs["rgb"], obs["depth"],
                                                      obs.get("depth_valid"), r, **pre), parts)
