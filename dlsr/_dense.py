@@ -10,6 +10,8 @@ A canvas is an ``(H, W, 8)`` float32 image with an ``(H, W, 8)`` validity mask (
   group with fewer than two valid entries has variance 0);
 * :func:`gather_patches`: the standardised patches at chosen positions, one row each (masked
   entries 0), ready for one matrix product;
+* :func:`valid_row_spans`: the rows of each patch that hold valid entries (the rectangle
+  images' padding masks whole rows);
 * :func:`triangle_scores`: from ``Y1 = whitened patch + mP`` and ``Y2 = whitened patch . c_k +
   b_k`` (one product of the standardised patches with ``[P | P C^T]``), the k-means triangle
   codes ``max(mean_k z - z_k, 0)``, ``z_k = ||x - c_k||`` (:func:`dlsr.coding.kmeans_triangle`),
@@ -40,6 +42,7 @@ __all__ = [
     "window_stats",
     "gather_patches",
     "gather_masks",
+    "valid_row_spans",
     "triangle_scores",
     "soft_threshold_inplace",
     "soft_threshold_into",
@@ -171,6 +174,37 @@ def gather_masks(msk, rows, cols, M):
                 o = (dy * PATCH + dx) * 8
                 for ch in range(8):
                     M[t, o + ch] = 1.0 if msk[r + dy, c + dx, ch] else 0.0
+
+
+@njit(nogil=True, cache=True)
+def valid_row_spans(M, lo, hi):
+    """The rows of each flattened patch that hold valid entries: ``[lo[t], hi[t])``.
+
+    Parameters
+    ----------
+    M : ndarray of shape (n, 288), float32
+        Patch validity (0/1), as :func:`gather_masks` writes it.
+    lo, hi : ndarray of shape (n,), int64, written
+        The first patch row with a valid entry and one past the last (``lo == hi == 0`` for
+        a patch with none): entries outside those rows are all masked.
+    """
+    width = PATCH * 8
+    for t in range(M.shape[0]):
+        first = -1
+        last = -1
+        for r in range(PATCH):
+            for q in range(r * width, (r + 1) * width):
+                if M[t, q] != 0.0:
+                    if first < 0:
+                        first = r
+                    last = r
+                    break
+        if first < 0:
+            lo[t] = 0
+            hi[t] = 0
+        else:
+            lo[t] = first
+            hi[t] = last + 1
 
 
 @njit(nogil=True, cache=True, fastmath=True)

@@ -66,7 +66,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import Delaunay, QhullError
 
-from . import _threads
+from . import _crops, _threads
 from .datasets import GraspSample
 from .rectangles import GraspRectangle, as_rect_array, normalize_angle
 
@@ -95,7 +95,11 @@ GRAY_WEIGHTS = (0.2989, 0.5870, 0.1140)
 
 _INTERPOLATIONS = {"area": cv2.INTER_AREA, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
 _FILLS = ("band", "griddata", "nearest")
+_LOCATES = ("scipy", "compiled")
 _ONE = 1.0 - 1e-6  # bilinear weights summing to one, up to float32 rounding
+# as numpy compares float32 samples with _ONE and weighs them with GRAY_WEIGHTS (NEP 50)
+_ONE32 = np.float32(_ONE)
+_GRAY32 = np.asarray(GRAY_WEIGHTS, dtype=np.float32)
 
 
 def _one_blas_thread():
@@ -227,24 +231,10 @@ def surface_normals(z) -> np.ndarray:
     z = np.asarray(z, dtype=np.float64)
     if z.ndim != 2:
         raise ValueError(f"z must be 2-D, got shape {z.shape}")
-
-    def grad(a, axis):
-        a = np.moveaxis(a, axis, 0)
-        m = a.shape[0]
-        if m == 1:
-            return np.moveaxis(np.zeros_like(a), 0, axis)
-        if m == 2:
-            lo, hi = 2 * a[0] - a[1], 2 * a[1] - a[0]
-        else:
-            lo = 3 * a[0] - 3 * a[1] + a[2]
-            hi = 3 * a[-1] - 3 * a[-2] + a[-3]
-        p = np.concatenate([lo[None], a, hi[None]], axis=0)
-        return np.moveaxis((p[2:] - p[:-2]) / 2.0, 0, axis)
-
-    gx = grad(z, 1)
-    gy = grad(z, 0)
-    inv = 1.0 / np.sqrt(gx * gx + gy * gy + 1.0)
-    return np.stack([-gx * inv, -gy * inv, inv], axis=-1).astype(np.float32)
+    out = np.zeros((*z.shape, 3), dtype=np.float32)
+    if z.size:
+        _crops.normals(z, out)
+    return out
 
 
 def _linear_interpolate(points, values, query) -> np.ndarray:
@@ -268,7 +258,8 @@ def _linear_interpolate(points, values, query) -> np.ndarray:
     return out
 
 
-def fill_depth_holes(z, valid, method: str = "band", band: int = 1) -> np.ndarray:
+def fill_depth_holes(z, valid, method: str = "band", band: int = 1, *,
+                     locate: str = "scipy") -> np.ndarray:
     """Fill invalid pixels of a depth map: linear scattered interpolation, then nearest.
 
     Parameters
@@ -286,6 +277,13 @@ def fill_depth_holes(z, valid, method: str = "band", band: int = 1) -> np.ndarra
         Pixels outside the triangulation's hull get the nearest valid value in every case.
     band : int
         Width of the band for ``method="band"``.
+    locate : {"scipy", "compiled"}
+        How the linear interpolation finds each hole's triangle and weights: ``"scipy"``
+        (default) with the triangulation's ``find_simplex`` and its barycentric transforms (a
+        LAPACK factorisation per triangle, the reference); ``"compiled"`` with exact integer
+        orientation tests and Cramer's rule on the pixel offsets, in compiled code
+        (:func:`dlsr._crops.interpolate_in_triangles`): the same triangulation and the same
+        values up to float rounding, about 5 times faster (the detectors' exact scores).
 
     Returns
     -------
@@ -294,6 +292,8 @@ def fill_depth_holes(z, valid, method: str = "band", band: int = 1) -> np.ndarra
     """
     if method not in _FILLS:
         raise ValueError(f"unknown fill method {method!r}; choose from {_FILLS}")
+    if locate not in _LOCATES:
+        raise ValueError(f"unknown locate {locate!r}; choose from {_LOCATES}")
     z = np.asarray(z, dtype=np.float64)
     valid = np.asarray(valid, dtype=bool)
     if valid.all():
@@ -303,7 +303,9 @@ def fill_depth_holes(z, valid, method: str = "band", band: int = 1) -> np.ndarra
     out = np.where(valid, z, 0.0)
     holes = ~valid
     if method != "nearest":
-        if method == "band":
+        if method == "band" and locate == "compiled" and band >= 1:
+            support = _crops.hole_band(valid, int(band))
+        elif method == "band":
             near = ndimage.binary_dilation(holes, structure=np.ones((3, 3), bool),
                                            iterations=band)
             support = valid & near
@@ -312,13 +314,19 @@ def fill_depth_holes(z, valid, method: str = "band", band: int = 1) -> np.ndarra
         pts = np.argwhere(support)
         if len(pts) >= 3:
             try:
-                hp = np.argwhere(holes)
-                vals = _linear_interpolate(pts.astype(np.float64), z[support],
-                                           hp.astype(np.float64))
-                ok = np.isfinite(vals)
-                out[hp[ok, 0], hp[ok, 1]] = vals[ok]
-                holes = holes.copy()
-                holes[hp[ok, 0], hp[ok, 1]] = False
+                if locate == "compiled":
+                    simplices = Delaunay(pts.astype(np.float64)).simplices
+                    holes = holes.copy()
+                    _crops.interpolate_in_triangles(pts.astype(np.int64), z[support],
+                                                    simplices, holes, out)
+                else:
+                    hp = np.argwhere(holes)
+                    vals = _linear_interpolate(pts.astype(np.float64), z[support],
+                                               hp.astype(np.float64))
+                    ok = np.isfinite(vals)
+                    out[hp[ok, 0], hp[ok, 1]] = vals[ok]
+                    holes = holes.copy()
+                    holes[hp[ok, 0], hp[ok, 1]] = False
             except QhullError:  # collinear support (e.g. a single valid row): nearest only
                 pass
     if holes.any():
@@ -334,49 +342,34 @@ def _gray(rgb):
 
 
 def _sample(src, rect, ncols, nrows):
-    """Bilinear samples of the padded source on a rotated ``nrows x ncols`` grid."""
-    x, y, theta, _, _ = rect
-    c, s = np.cos(theta), np.sin(theta)
-    u = np.array([c, -s])  # closing direction (x, y), rows grow downward
-    v = np.array([s, c])  # across it, p1 -> p2
-    cols = np.arange(ncols) - (ncols - 1) / 2.0
-    rows = np.arange(nrows) - (nrows - 1) / 2.0
-    H, W = src.shape[0] - 2, src.shape[1] - 2
-    # +1 for the zero border; clip so that far-away samples read the border.
-    xs = np.clip(x + 1 + rows[:, None] * v[0] + cols[None, :] * u[0], 0.0, W + 1.0)
-    ys = np.clip(y + 1 + rows[:, None] * v[1] + cols[None, :] * u[1], 0.0, H + 1.0)
-    x0 = np.minimum(np.floor(xs).astype(np.intp), W)
-    y0 = np.minimum(np.floor(ys).astype(np.intp), H)
-    fx = (xs - x0)[..., None].astype(np.float32)
-    fy = (ys - y0)[..., None].astype(np.float32)
-    top = src[y0, x0] * (1 - fx) + src[y0, x0 + 1] * fx
-    bot = src[y0 + 1, x0] * (1 - fx) + src[y0 + 1, x0 + 1] * fx
-    return top * (1 - fy) + bot * fy
+    """Bilinear samples of the padded source on a rotated ``nrows x ncols`` grid
+    (:func:`dlsr._crops.bilinear_grid`)."""
+    x, y, theta = rect[0], rect[1], rect[2]
+    out = np.empty((nrows, ncols, src.shape[2]), dtype=np.float32)
+    _crops.bilinear_grid(np.ascontiguousarray(src, dtype=np.float32), float(x), float(y),
+                         float(np.cos(theta)), float(np.sin(theta)), nrows, ncols, out)
+    return out
 
 
-def _crop_full(src, rect, depth_scale, outlier_sigma, outlier_passes, fill, band):
-    """Full-resolution rotated crop: ``(Hc, Wc, 8)`` float32, image mask, depth mask."""
+def _crop_full(src, rect, depth_scale, outlier_sigma, outlier_passes, fill, band,
+               locate="scipy"):
+    """Full-resolution rotated crop: ``(Hc, Wc, 8)`` float32, image mask, depth mask.
+
+    Steps 1 to 5 of the module docstring, the sampling, masks, outliers and channels in one
+    compiled pass (:func:`dlsr._crops.sample_crop`), then the hole filling and the normals.
+    """
     ncols = int(round(rect[3]))
     nrows = int(round(rect[4]))
-    smp = _sample(src, rect, ncols, nrows)
-    inside = smp[..., 5] >= _ONE
-    dvalid = (smp[..., 4] >= _ONE) & inside
-    dep = smp[..., 3].astype(np.float64)
-    for _ in range(outlier_passes):
-        vals = dep[dvalid]
-        if vals.size < 2:
-            break
-        mu = vals.mean()
-        sd = vals.std(ddof=1)
-        dvalid &= ~(np.abs(dep - mu) > outlier_sigma * sd)
+    theta = rect[2]
     full = np.zeros((nrows, ncols, 8), dtype=np.float32)
-    rgb = smp[..., :3] * inside[..., None]
-    full[..., 1:4] = rgb
-    full[..., 0] = _gray(rgb)
-    if dvalid.any():
-        d = np.where(dvalid, (dep - dep[dvalid].mean()) * depth_scale, 0.0)
-        full[..., 4] = d
-        full[..., 5:8] = surface_normals(fill_depth_holes(d, dvalid, fill, band))
+    inside = np.empty((nrows, ncols), dtype=bool)
+    dvalid = np.empty((nrows, ncols), dtype=bool)
+    d = np.empty((nrows, ncols))
+    if _crops.sample_crop(src, float(rect[0]), float(rect[1]), float(np.cos(theta)),
+                          float(np.sin(theta)), nrows, ncols, _ONE32, _GRAY32,
+                          float(depth_scale), float(outlier_sigma), int(outlier_passes), full,
+                          inside, dvalid, d):
+        _crops.normals(fill_depth_holes(d, dvalid, fill, band, locate=locate), full[..., 5:8])
     return full, inside, dvalid
 
 
@@ -410,7 +403,8 @@ def _resize_into(full, imask, dmask, size, interp):
     return img, msk
 
 
-def _options(size, depth_scale, outlier_sigma, outlier_passes, interpolation, fill, band):
+def _options(size, depth_scale, outlier_sigma, outlier_passes, interpolation, fill, band,
+             locate="scipy"):
     if int(size) != size or size < 1:
         raise ValueError(f"size must be a positive integer, got {size}")
     if not np.isfinite(depth_scale) or depth_scale <= 0:
@@ -421,8 +415,10 @@ def _options(size, depth_scale, outlier_sigma, outlier_passes, interpolation, fi
         )
     if fill not in _FILLS:
         raise ValueError(f"unknown fill method {fill!r}; choose from {_FILLS}")
+    if locate not in _LOCATES:
+        raise ValueError(f"unknown locate {locate!r}; choose from {_LOCATES}")
     return dict(depth_scale=float(depth_scale), outlier_sigma=float(outlier_sigma),
-                outlier_passes=int(outlier_passes), fill=fill, band=int(band))
+                outlier_passes=int(outlier_passes), fill=fill, band=int(band), locate=locate)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -443,6 +439,7 @@ def rectangle_images(
     interpolation: str = "area",
     fill: str = "band",
     band: int = 1,
+    locate: str = "scipy",
 ):
     """8-channel images of grasp rectangles, rotated, cropped, resized and padded.
 
@@ -471,6 +468,9 @@ def rectangle_images(
     fill : {"band", "griddata", "nearest"}, default="band"
         Hole filling for the normals, see :func:`fill_depth_holes`.
     band : int, default=1
+    locate : {"scipy", "compiled"}, default="scipy"
+        How the hole filling locates each hole's triangle and weighs it, see
+        :func:`fill_depth_holes` (``"compiled"``: the same images up to float rounding).
 
     Returns
     -------
@@ -486,7 +486,8 @@ def rectangle_images(
         finite or has ``w < 2`` or ``h < 2`` pixels (the message names its index).
     """
     rgb, depth, depth_valid, rects = _unpack(rgb, depth, depth_valid, rects)
-    opts = _options(size, depth_scale, outlier_sigma, outlier_passes, interpolation, fill, band)
+    opts = _options(size, depth_scale, outlier_sigma, outlier_passes, interpolation, fill, band,
+                    locate)
     size = int(size)
     interp = _INTERPOLATIONS[interpolation]
     arr = _check_rects(rects)

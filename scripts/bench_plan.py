@@ -14,9 +14,11 @@ The reference: ``--reference DIR``, a checkout of the code before the change (e.
 worktree add /tmp/base <commit>``). This script then runs a worker process on that code
 (``PYTHONPATH=DIR``) beside one on this checkout, round after round in turn, so that both see
 the same load, on the same observations (written once to a temporary file); it reports the
-reference's DLSR plan times beside the new ones, and whether both propose the same rectangles
-in the same order on every scene (``identical_proposals``; ``max_score_difference``: of the
-scores of the proposed rectangles).
+reference's plan times of ``dlsr`` and ``dlsr-paper`` (both rank by DLSR's exact scores)
+beside the new ones, and whether both codes propose the same rectangles in the same order on
+every scene (``identical_proposals``; ``max_score_difference``: of the scores of the proposed
+rectangles, beside ``largest_score``). ``plan_cpu_seconds``: the process's CPU seconds per plan
+(all its threads), less sensitive than wall time to other work on a shared machine.
 
 Usage: python scripts/bench_plan.py [--scenes 20] [--seed 0] [--rounds 3]
        [--model results/ggcnn-curve/models/dlsr_300]
@@ -105,24 +107,31 @@ def _detectors(names, model, ggcnn, hand):
     return out
 
 
+#: The detectors whose proposals are compared with the reference's (both use DLSR's exact
+#: scores: the lattice's 192 candidates, the dense search's rescored best).
+COMPARED = ("dlsr", "dlsr-paper")
+
+
 def worker(obs_path, names, model, ggcnn, hand):
-    """Plan every scene once with each detector: seconds, and DLSR's proposals and scores."""
+    """Plan every scene once with each detector: wall and process CPU seconds, and the DLSR
+    detectors' proposals and scores."""
     obs = _load(obs_path)
     dets = _detectors(names, model, ggcnn, hand)
     out = {}
     for name, det in dets.items():
         det.predict(obs[-1])  # warm up (compiled kernels, model files) on a scene not timed
-        seconds, rects, scores = [], [], []
+        seconds, cpu, rects, scores = [], [], [], []
         for o in obs[:-1]:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             det.predict(o)
             seconds.append(time.perf_counter() - t0)
-            if name == "dlsr":
+            cpu.append(time.process_time() - c0)
+            if name in COMPARED:
                 d = det.detect(o)
                 rects.append(np.asarray(d.rects).tolist())
                 scores.append(np.asarray(d.scores).tolist())
-        out[name] = {"seconds": seconds}
-        if name == "dlsr":
+        out[name] = {"seconds": seconds, "cpu_seconds": cpu}
+        if name in COMPARED:
             out[name].update(rects=rects, scores=scores)
     return out
 
@@ -145,6 +154,19 @@ def _stats(per_round):
     x = np.median(np.asarray(per_round, dtype=float), axis=0)
     return {"median": float(np.median(x)), "p95": float(np.percentile(x, 95)),
             "n_scenes": int(len(x)), "n_rounds": len(per_round)}
+
+
+def _same(new, ref, name):
+    """Whether ``name`` proposed the same rectangles in the same order on every scene, in every
+    round of both codes, and how far apart the proposed rectangles' scores are."""
+    a, b = new[0][name], ref[0][name]
+    same = [x == y for x, y in zip(a["rects"], b["rects"], strict=True)]
+    diffs = [float(np.max(np.abs(np.subtract(x, y)))) if len(x) and len(x) == len(y)
+             else 0.0 for x, y in zip(a["scores"], b["scores"], strict=True)]
+    stable = all(r[name]["rects"] == a["rects"] for r in new + ref)
+    return {"scenes": len(same), "identical": int(sum(same)), "same_every_round": stable,
+            "max_score_difference": max(diffs, default=0.0),
+            "largest_score": max((abs(v) for x in b["scores"] for v in x), default=0.0)}
 
 
 def main(argv=None):
@@ -174,26 +196,26 @@ def main(argv=None):
             new.append({k: v for name in names
                         for k, v in _run_worker(obs_path, [name], args).items()})
             if args.reference:
-                ref.append(_run_worker(obs_path, ["dlsr"], args, pythonpath=args.reference))
+                ref.append({k: v for name in names if name in COMPARED
+                            for k, v in _run_worker(obs_path, [name], args,
+                                                    pythonpath=args.reference).items()})
     out = {"scenes": args.scenes, "seed": args.seed, "hand": args.hand,
            "cpus": len(os.sched_getaffinity(0)),
            "load_average": {"start": load_before, "end": list(os.getloadavg())},
-           "plan_seconds": {}}
+           "plan_seconds": {}, "plan_cpu_seconds": {}}
     for name in new[0]:
         out["plan_seconds"][name] = _stats([r[name]["seconds"] for r in new])
+        out["plan_cpu_seconds"][name] = _stats([r[name]["cpu_seconds"] for r in new])
     if ref:
-        out["plan_seconds"]["dlsr (reference)"] = _stats([r["dlsr"]["seconds"] for r in ref])
-        same = [a == b for a, b in zip(new[0]["dlsr"]["rects"], ref[0]["dlsr"]["rects"],
-                                       strict=True)]
-        diffs = [float(np.max(np.abs(np.subtract(a, b)))) if len(a) and len(a) == len(b)
-                 else 0.0 for a, b in zip(new[0]["dlsr"]["scores"], ref[0]["dlsr"]["scores"],
-                                          strict=True)]
-        stable = all(r["dlsr"]["rects"] == new[0]["dlsr"]["rects"] for r in new + ref)
-        out["identical_proposals"] = {"scenes": len(same), "identical": int(sum(same)),
-                                      "same_every_round": stable,
-                                      "max_score_difference": max(diffs, default=0.0)}
-        out["speedup_median"] = (out["plan_seconds"]["dlsr (reference)"]["median"]
-                                 / out["plan_seconds"]["dlsr"]["median"])
+        out["identical_proposals"], out["speedup_median"] = {}, {}
+        for name in ref[0]:
+            for what in ("seconds", "cpu_seconds"):
+                key = "plan_" + what
+                out[key][f"{name} (reference)"] = _stats([r[name][what] for r in ref])
+            out["identical_proposals"][name] = _same(new, ref, name)
+            out["speedup_median"][name] = {
+                what: out[key][f"{name} (reference)"]["median"] / out[key][name]["median"]
+                for what, key in (("wall", "plan_seconds"), ("cpu", "plan_cpu_seconds"))}
     print(json.dumps(out, indent=2))
 
 

@@ -91,11 +91,20 @@ class _PatchScorer:
         Per-quadrant weights on the codes.
     n_blocks : int
         Column blocks of ``L`` (4 was fastest here; 1 computes all of ``L`` in one product).
+    by_rows : bool
+        Whiten a patch with masked entries on the rows that hold valid ones only (the
+        rectangle images' padding masks whole patch rows): the patches sharing those rows
+        ``T`` are multiplied by the block ``P[T, T]`` and by ``C[:, T]^T``, which is what the
+        whole products give, since the other rows are 0 before whitening and masked after,
+        with fewer operations (2 |T| (|T| + k) per patch); the scores are the same up to
+        float rounding (the products sum in another order). The exact scores use it.
     """
 
-    def __init__(self, model, V, n_blocks: int = 4):
+    def __init__(self, model, V, n_blocks: int = 4, by_rows: bool = False):
         rep = model.representation
         self.model = model
+        self.by_rows = by_rows
+        self._rows = {}
         self.V = np.asarray(V, np.float32)
         self.VT = np.ascontiguousarray(self.V.T)
         p = PATCH * PATCH * 8
@@ -195,6 +204,8 @@ class _PatchScorer:
         if not self.whiten:
             return self._triangle_whitened(X)
         M = self._masks(msk, rows, cols)
+        if self.by_rows and self.triangle:
+            return self._triangle_by_rows(X, M)
         blank = ~M.any(axis=1)
         if not blank.any():
             return self._triangle_whitened(X, M)
@@ -220,6 +231,46 @@ class _PatchScorer:
         S = np.empty((len(X), self.V.shape[1]), np.float32)
         _dense.triangle_scores(X, 0, X @ self.CT, 0, self.zero, self.cc, self.VT, S)
         return S
+
+    def _triangle_by_rows(self, X, M):
+        """:meth:`_triangle_whitened` of masked patches, each on its rows with valid entries
+        (``by_rows``); a patch without any has the all-masked patch's scores."""
+        from .. import _dense
+
+        n = len(X)
+        lo = np.empty(n, np.int64)
+        hi = np.empty(n, np.int64)
+        _dense.valid_row_spans(M, lo, hi)
+        S = np.empty((n, self.V.shape[1]), np.float32)
+        blank = hi == 0
+        if blank.any():
+            S[blank] = self._blank_scores()
+        live = np.flatnonzero(~blank)
+        key = lo[live] * (PATCH + 1) + hi[live]
+        order = live[np.argsort(key, kind="stable")]
+        cuts = np.flatnonzero(np.diff(np.sort(key, kind="stable"))) + 1
+        for group in np.split(order, cuts):
+            a, b = int(lo[group[0]]), int(hi[group[0]])
+            PT, mPT, CT, zero = self._row_blocks(a, b)
+            e0, e1 = a * PATCH * 8, b * PATCH * 8
+            W = X[group, e0:e1] @ PT
+            W -= mPT
+            W *= M[group, e0:e1]
+            Sg = np.empty((len(group), self.V.shape[1]), np.float32)
+            _dense.triangle_scores(W, 0, W @ CT, 0, zero, self.cc, self.VT, Sg)
+            S[group] = Sg
+        return S
+
+    def _row_blocks(self, a, b):
+        """``P[T, T]``, ``(m P)[T]``, ``C[:, T]^T`` and zeros for the patch rows ``[a, b)``."""
+        key = (a, b)
+        if key not in self._rows:
+            e0, e1 = a * PATCH * 8, b * PATCH * 8
+            self._rows[key] = (np.ascontiguousarray(self.P[e0:e1, e0:e1]),
+                               np.ascontiguousarray(self.mP[e0:e1]),
+                               np.ascontiguousarray(self.CT[e0:e1]),
+                               np.zeros(e1 - e0, np.float32))
+        return self._rows[key]
 
     def _blank_scores(self):
         """The scores of a patch whose every entry is masked (as :meth:`_triangle_masked`
@@ -479,6 +530,7 @@ class DenseDetector(_Base):
             return np.zeros(0)
         pre = dict(self.model.preprocess)
         pre["size"] = SIZE
+        pre["locate"] = "compiled"  # the holes' values up to float rounding, 5 times sooner
         parts = [r for r in np.array_split(rects, self._threads()) if len(r)]
         made = _map(pool, lambda r: rectangle_images(obs["rgb"], obs["depth"],
                                                      obs.get("depth_valid"), r, **pre), parts)
@@ -486,7 +538,7 @@ class DenseDetector(_Base):
         img = np.concatenate([m[0] for m in made]).reshape(n * SIZE, SIZE, 8)
         msk = np.concatenate([m[1] for m in made]).reshape(n * SIZE, SIZE, 8)
         V, const = self.model.quadrant_weights()
-        scorer = _PatchScorer(self.model, V)
+        scorer = _PatchScorer(self.model, V, by_rows=True)
         Hp = n * SIZE - PATCH + 1
         mean = np.empty((Hp, GRID, 4), np.float32)
         inv = np.empty((Hp, GRID, 4), np.float32)

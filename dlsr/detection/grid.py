@@ -325,14 +325,21 @@ def _content_key(depth, depth_valid) -> bytes:
     Two ways of passing the same image (float32 or float64 depth, a validity mask of uint8 or
     bool, or none where the missing depth is already 0) get the same key, so that the detector,
     its physical term and the gripper-aware check (which passes a bool mask) share one fit; the
-    fit reads nothing else (:func:`_fit_table`), so the memo still changes no result.
+    fit reads nothing else (:func:`_fit_table`), so the memo still changes no result. The
+    depth is digested as float32 when float32 holds its values exactly (a camera's float32
+    depth, or the same values in float64: half the bytes, no float64 copy), else as float64.
     """
     depth = np.asarray(depth)
     valid = valid_depth(depth, depth_valid)
+    kept = np.where(valid, depth, 0).reshape(-1)
+    if kept.dtype != np.float32:
+        wide = kept.astype(np.float64, copy=False)
+        narrow = wide.astype(np.float32)
+        kept = narrow if np.array_equal(narrow, wide) else wide
     h = hashlib.blake2b(digest_size=16)
-    h.update(f"{depth.shape}".encode())
+    h.update(f"{depth.shape} {kept.dtype.str}".encode())
     h.update(np.packbits(valid.reshape(-1)).tobytes())
-    h.update(np.where(valid, depth.astype(np.float64), 0.0).reshape(-1).view(np.uint8))
+    h.update(kept.view(np.uint8))
     return h.digest()
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from numba import njit
 
 from ..datasets import check_camera_matrix
 from ..rectangles import GraspRectangle, normalize_angle
@@ -280,34 +281,62 @@ def _lattice_array(mask, depth, intrinsics, offset, max_opening, jaw_px=(10.0, 2
     return arr, out_keys
 
 
-def _runs(mask, dep, centres, zc, thetas, depth_band, max_px: float = 120.0, block: int = 128):
+def _runs(mask, dep, centres, zc, thetas, depth_band, max_px: float = 120.0):
     """:func:`chords` of every lattice point at once, on the mask and on the surface no deeper
     than ``depth_band`` beyond the point's depth ``zc``: ``lo_m, hi_m, lo_n, hi_n`` of shape
-    ``(n_points, n_angles)``; the same pixels and arithmetic as :func:`chords` point by point."""
-    H, W = mask.shape
+    ``(n_points, n_angles)``; the same pixels and arithmetic as :func:`chords` point by point
+    (:func:`_runs_kernel`, each walk stopping where both runs have ended)."""
     thetas = np.asarray(thetas, dtype=float)
     u = np.column_stack([np.cos(thetas), -np.sin(thetas)])
-    t = np.arange(0.0, max_px + 1.0)
     n = len(centres)
-    out = [np.empty((n, len(thetas))) for _ in range(4)]
-    for s0 in range(0, n, block):
-        c = np.asarray(centres[s0:s0 + block], float)
-        z = zc[s0:s0 + block]
-        for sgn, (i_m, i_n) in ((1.0, (1, 3)), (-1.0, (0, 2))):
-            pts = np.rint(c[:, None, None, :]
-                          + (sgn * t[None, :, None] * u[:, None, :])[None]).astype(int)
-            ok = ((pts[..., 0] >= 0) & (pts[..., 0] < W) & (pts[..., 1] >= 0)
-                  & (pts[..., 1] < H))
-            r, q = pts[..., 1][ok], pts[..., 0][ok]
-            on = np.zeros(ok.shape, dtype=bool)
-            on[ok] = mask[r, q]
-            d = np.zeros(ok.shape)
-            d[ok] = dep[r, q]
-            near = on & (d > 0) & (d < np.broadcast_to(z[:, None, None], d.shape) + depth_band)
-            for run, idx in ((on, i_m), (near, i_n)):
-                stop = np.where(run.all(axis=2), len(t), np.argmin(run, axis=2))
-                out[idx][s0:s0 + block] = np.maximum(stop - 1, 0) * sgn
-    return out
+    out = np.empty((4, n, len(thetas)))
+    if n:
+        _runs_kernel(np.ascontiguousarray(mask, dtype=bool), np.ascontiguousarray(dep, float),
+                     np.ascontiguousarray(centres, float), np.asarray(zc, float), u,
+                     float(depth_band), int(max_px) + 1, out)
+    return out[0], out[1], out[2], out[3]
+
+
+@njit(nogil=True, cache=True)
+def _runs_kernel(mask, dep, centres, zc, u, depth_band, n_steps, out):
+    """Walk from each centre along ``+u`` and ``-u`` (pixel ``rint(c + (s t) u)``, ``t = 0,
+    1, ...``) until the mask and the near surface (valid depth below ``zc + depth_band``) have
+    both ended; ``out[0..3]``: ``lo_m, hi_m, lo_n, hi_n`` (the last step inside, signed)."""
+    H, W = mask.shape
+    for p in range(centres.shape[0]):
+        cx = centres[p, 0]
+        cy = centres[p, 1]
+        lim = zc[p] + depth_band
+        for a in range(u.shape[0]):
+            for side in range(2):
+                sgn = 1.0 if side == 0 else -1.0
+                stop_m = -1
+                stop_n = -1
+                for t in range(n_steps):
+                    st = sgn * t
+                    x = np.rint(cx + st * u[a, 0])
+                    y = np.rint(cy + st * u[a, 1])
+                    on = False
+                    near = False
+                    if x >= 0 and x < W and y >= 0 and y < H:
+                        xi = int(x)
+                        yi = int(y)
+                        on = mask[yi, xi]
+                        d = dep[yi, xi]
+                        near = on and d > 0 and d < lim
+                    if stop_m < 0 and not on:
+                        stop_m = t
+                    if stop_n < 0 and not near:
+                        stop_n = t
+                    if stop_m >= 0 and stop_n >= 0:
+                        break
+                if stop_m < 0:
+                    stop_m = n_steps
+                if stop_n < 0:
+                    stop_n = n_steps
+                i_m, i_n = (1, 3) if side == 0 else (0, 2)
+                out[i_m, p, a] = max(stop_m - 1, 0) * sgn
+                out[i_n, p, a] = max(stop_n - 1, 0) * sgn
 
 
 def _fill_region_holes(depth, valid, region):

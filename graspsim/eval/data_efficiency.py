@@ -37,7 +37,7 @@ from ..data.datagen import make_dataset
 from ..detectors.base import check_detections
 from ..detectors.ggcnn.detector import GGCNNDetector
 from ..detectors.ggcnn.model import model_paths
-from ..detectors.ggcnn.train import train_ggcnn
+from ..detectors.ggcnn.train import train_ggcnn, trainer
 from ..detectors.gripper_aware import gripper_aware
 from ..detectors.loading import load_detector
 from ..runtime.executor import Executor, task_seeds
@@ -47,8 +47,8 @@ from .trials import TrialConfig, run_trials
 
 log = logging.getLogger(__name__)
 
-__all__ = ["data_efficiency", "equal_time_model", "catch_up", "curve_markdown",
-           "curve_figure"]
+__all__ = ["data_efficiency", "train_dlsr_models", "equal_time_model", "catch_up",
+           "curve_markdown", "curve_figure"]
 
 #: GG-CNN's rows at every size: the budget chosen on validation scenes, and the model trained
 #: for as long as DLSR's default took to train (equal training wall time), raw and
@@ -64,8 +64,39 @@ def _rect_accuracy(det, samples) -> dict:
     return {"correct": int(sum(ok)), "n": len(ok)}
 
 
+def train_dlsr_models(samples, folder, n: int, seed: int, n_atoms: int = 200,
+                      n_patches: int = 50_000, hand: str = "builtin") -> dict:
+    """DLSR's two rows of a training size, trained once (timed) and loaded.
+
+    ``dlsr``: ``graspsim run``'s default (lattice detector, physical features, gripper-aware
+    with ``hand``); ``dlsr-paper``: the paper's (dense grid, appearance only). Saved as
+    ``folder/<name>_<n>`` with the training wall time in ``<name>_<n>.seconds.json``; a saved
+    model is loaded, not trained again.
+
+    Returns
+    -------
+    dict
+        Row name to ``(detector, training seconds)``.
+    """
+    models = {}
+    for name, physical, kind in (("dlsr", True, "lattice"), ("dlsr-paper", False, "dense")):
+        mpath = Path(folder) / f"{name}_{n}"
+        timing = mpath.with_name(mpath.name + ".seconds.json")
+        if not timing.exists():
+            t0 = time.perf_counter()
+            m = train_detector(samples, n_atoms=n_atoms, n_patches=n_patches,
+                               random_state=seed, detector=kind, physical=physical,
+                               grid_negatives=0.0)
+            m.save(mpath)
+            write_text_atomic(timing, json.dumps({"seconds": time.perf_counter() - t0}))
+        det = DLSRDetector.load(mpath).detector(kind)
+        models[name] = (gripper_aware(det, hand=hand) if name == "dlsr" else det,
+                        read_json(timing, "timing")["seconds"])
+    return models
+
+
 def equal_time_model(gpath, seconds: float, samples, seed: int, device: str = "cpu",
-                     progress: bool = True):
+                     progress: bool = True, network: str = "ggcnn", **arch):
     """GG-CNN trained for ``seconds`` of wall time: the snapshot the full run saved then
     (``snapshot_seconds``), else, when the full run took no longer, the full model, else a
     model trained for the sample-steps that fit at the full run's rate (same seed and batches:
@@ -79,6 +110,9 @@ def equal_time_model(gpath, seconds: float, samples, seed: int, device: str = "c
         The training wall time to match (DLSR's).
     samples, seed, device, progress :
         As the full run (:func:`graspsim.detectors.ggcnn.train.train_ggcnn`), for the fallback.
+    network : str
+        The full run's network (:func:`graspsim.detectors.ggcnn.train.trainer`); ``arch``, its
+        architecture options as the full run took them (e.g. ``channels``).
     """
     snap = gpath.with_name(f"{gpath.name}_time{round(seconds)}s")
     if model_paths(snap)[1].is_file():
@@ -95,7 +129,8 @@ def equal_time_model(gpath, seconds: float, samples, seed: int, device: str = "c
     if not model_paths(epath)[1].is_file():
         log.info("GG-CNN: %s has no snapshot at %.0f s; training %d sample-steps", gpath,
                  seconds, steps)
-        train_ggcnn(samples, epath, steps=steps, seed=seed, device=device, progress=progress)
+        trainer(network)(samples, epath, steps=steps, seed=seed, device=device,
+                         progress=progress, **arch)
     return epath
 
 
@@ -168,20 +203,7 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
         samples = sorted(samples, key=lambda s: s.image_id)[:n]
         key = str(n)
         rows = result["rows"].setdefault(key, {})
-        models = {}
-        for name, physical, kind in (("dlsr", True, "lattice"), ("dlsr-paper", False, "dense")):
-            mpath = out / "models" / f"{name}_{n}"
-            timing = mpath.with_name(mpath.name + ".seconds.json")
-            if not timing.exists():
-                t0 = time.perf_counter()
-                m = train_detector(samples, n_atoms=n_atoms, n_patches=n_patches,
-                                   random_state=s_model, detector=kind, physical=physical,
-                                   grid_negatives=0.0)
-                m.save(mpath)
-                write_text_atomic(timing, json.dumps({"seconds": time.perf_counter() - t0}))
-            det = DLSRDetector.load(mpath).detector(kind)
-            models[name] = (gripper_aware(det) if name == "dlsr" else det,
-                            read_json(timing, "timing")["seconds"])
+        models = train_dlsr_models(samples, out / "models", n, s_model, n_atoms, n_patches)
         gpath = out / "models" / f"ggcnn_{n}"
         dlsr_seconds = models["dlsr"][1]
         if not model_paths(gpath)[1].is_file():

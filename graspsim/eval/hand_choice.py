@@ -127,7 +127,7 @@ def choose_per_hand(out, hands, curve_model, objects: str = "ycb:train", n_train
     train = str(objects)
     dlsr = {**_DLSR, "n_atoms": int(n_atoms), "n_patches": int(n_patches)}
     s_data, s_val, s_model = task_seeds(seed, 3)
-    ex = executor or Executor("sequential")
+    ex = executor or Executor("sequential", progress=progress)
     cfg = {"objects": train, "hands": list(hands), "n_train": int(n_train),
            "n_val": int(n_val), "candidates": int(candidates), "seed": int(seed),
            "curve_model": str(curve_model), "dlsr": dlsr}

@@ -608,3 +608,44 @@ def test_patches_with_every_entry_masked_score_as_the_all_masked_patch():
     assert blank.sum() >= 3 * Wp and (~blank).sum() > 100
     np.testing.assert_array_equal(S[bad][blank], ref[blank])
     np.testing.assert_allclose(S[bad], ref, rtol=1e-5, atol=1e-5 * np.abs(ref).max())
+
+
+def test_masked_patches_whitened_on_their_valid_rows_score_as_the_whole_products():
+    """``by_rows``: a masked patch whitened on the rows holding its valid entries (the
+    padding's rows dropped, a depth hole kept as a mask) scores as the whole 288 x 288
+    whitening and centroid products give, up to float rounding; patches without a valid entry
+    get the all-masked patch's scores; image masks that are not whole rows are right too."""
+    from dlsr import _dense
+
+    obs = _scene()
+    model = _random_model(obs)
+    rng = np.random.default_rng(5)
+    img = rng.normal(size=(44, 24, 8)).astype(np.float32)
+    msk = np.ones(img.shape, bool)
+    msk[:9] = False  # padding rows above a crop's content
+    msk[30:] = False  # and below
+    msk[15:19, 5:11, 4:] = False  # a depth hole
+    msk[20:24, :3, :] = False  # outside the source image: part of some rows
+    msk[34:40, 10:12, :4] = True  # a few valid entries in padding rows (not a crop's pattern)
+    img *= msk
+    V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
+    rows_scorer = _PatchScorer(model, V, by_rows=True)
+    whole = _PatchScorer(model, V)
+    Hp, Wp = img.shape[0] - 5, img.shape[1] - 5
+    mean = np.empty((Hp, Wp, 4), np.float32)
+    inv = np.empty((Hp, Wp, 4), np.float32)
+    full = np.empty((Hp, Wp), bool)
+    _dense.window_stats(img, msk, 1e-4, mean, inv, full)
+    rows, cols = np.divmod(np.arange(Hp * Wp), Wp)
+    S = rows_scorer.scores(img, msk, rows, cols, mean, inv, full)
+    ref = whole.scores(img, msk, rows, cols, mean, inv, full)
+    np.testing.assert_array_equal(S[full[rows, cols]], ref[full[rows, cols]])
+    np.testing.assert_allclose(S, ref, rtol=1e-5, atol=1e-5 * np.abs(ref).max())
+    spans = np.empty((2, len(rows)), np.int64)
+    M = whole._masks(msk, rows, cols)
+    _dense.valid_row_spans(M, spans[0], spans[1])
+    assert len({tuple(s) for s in spans.T}) >= 8  # several row patterns were grouped
+    for t in rng.choice(len(rows), 50, replace=False):
+        valid_rows = np.flatnonzero(M[t].reshape(6, 48).any(axis=1))
+        expected = (valid_rows[0], valid_rows[-1] + 1) if len(valid_rows) else (0, 0)
+        assert tuple(spans[:, t]) == expected

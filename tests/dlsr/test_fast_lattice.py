@@ -209,3 +209,19 @@ def test_table_fit_is_shared_by_every_way_of_passing_the_same_image():
     _REGIONS.clear()
     assert np.array_equal(table_surface(depth.astype(np.float64), valid.astype(bool)), surface)
     assert np.array_equal(table_plane_mask(depth, None), region)
+
+
+def test_content_key_digests_float32_depth_once_and_tells_finer_float64_apart():
+    """The memo key digests depth as float32 when float32 holds it exactly: float32 depth and
+    the same values in float64 share a key; float64 depth that float32 would round does not
+    share the key of its rounding (the fit reads the float64 values)."""
+    from dlsr.detection.grid import _content_key
+
+    depth, valid, _ = _depth_scene()
+    d32 = np.asarray(depth, dtype=np.float32)
+    d64 = d32.astype(np.float64)
+    assert _content_key(d32, valid) == _content_key(d64, np.asarray(valid, dtype=bool))
+    finer = d64.copy()
+    finer[np.asarray(valid, dtype=bool)] += 1e-12
+    assert _content_key(finer, valid) != _content_key(d32, valid)
+    assert _content_key(finer, valid) == _content_key(finer.copy(), valid)

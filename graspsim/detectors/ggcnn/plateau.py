@@ -68,6 +68,13 @@ def plateau_reached(successes, patience: int = 2) -> bool:
     return max(s[-patience:]) <= max(s[:-patience])
 
 
+def _write_changed(path: Path, record: dict) -> None:
+    """Write ``record`` unless the file already holds it (a resumed run leaves it as it is)."""
+    text = json.dumps(record, indent=2)
+    if not path.is_file() or path.read_text() != text:
+        write_text_atomic(path, text)
+
+
 def _snapshot(path: Path, budget: int) -> Path:
     return path.with_name(f"{path.name}_step{budget}")
 
@@ -128,8 +135,8 @@ def train_to_plateau(train_fn, validate_fn, out, start: int = 2500, recipe: int 
             log.info("%s: %d sample-steps, validation %d/%d, %.0f s of training", out.name,
                      budget, k, n, entry["seconds"])
         curve.append(entry)
-        write_text_atomic(rec_path, json.dumps({"settings": settings, "budgets": curve},
-                                               indent=2))
+        if budget not in done:  # a resumed run rewrites nothing until a new budget
+            _write_changed(rec_path, {"settings": settings, "budgets": curve})
         if plateau_reached([b["successes"] for b in curve], patience):
             stopped = "plateau"
             break
@@ -139,7 +146,7 @@ def train_to_plateau(train_fn, validate_fn, out, start: int = 2500, recipe: int 
     best = max(curve, key=lambda b: (b["successes"], -b["budget"]))
     result = {"settings": settings, "budgets": curve, "chosen": best["budget"],
               "model": str(_snapshot(out, best["budget"])), "stopped": stopped}
-    write_text_atomic(rec_path, json.dumps(result, indent=2))
+    _write_changed(rec_path, result)
     return result
 
 
