@@ -495,6 +495,8 @@ def rectangle_features_multi(
     -------
     dict
         ``{encoder: list of ndarray of shape (n, 4 * k), float32}``, one per parameter.
+        Encoders that read the same codes (SC-Natural and SC at the dictionary's penalty, for
+        example) share the same array object, written once.
     """
     images = np.asarray(images, dtype=np.float32)
     masks = np.asarray(masks, dtype=bool)
@@ -529,12 +531,12 @@ def rectangle_features_multi(
                     if key not in pooled:
                         pooled[key] = _split_pool(codes[key[:3]].reshape(b, side, side, -1),
                                                   bool(polarity and key[3]))
-            if out is None:
-                out = {enc: [np.empty((n, pooled[key].shape[1]), dtype=np.float32) for key in keys]
-                       for enc, keys in plans.items()}
-            for enc, keys in plans.items():
-                for t, key in enumerate(keys):
-                    out[enc][t][start:start + b] = pooled[key]
+            if out is None:  # encoders reading the same codes share one array
+                arrays = {key: np.empty((n, pooled[key].shape[1]), dtype=np.float32)
+                          for key in pooled}
+                out = {enc: [arrays[key] for key in keys] for enc, keys in plans.items()}
+            for key, pooled_key in pooled.items():
+                arrays[key][start:start + b] = pooled_key
             acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
     return out
 
