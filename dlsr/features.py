@@ -387,6 +387,14 @@ def encode_patches_multi(X, M, rep: Representation, grids: dict, polarity: bool 
 def _multi_codes(X, M, rep, grids, cpu_seconds):
     """Unsplit codes of each computation the encoders need, each computed once.
 
+    A fully valid patch's masked lasso (penalty scaled by ``||m||_0 / p = 1``) and masked OMP
+    are the unmasked problems, so when both the masked and the unmasked computation of a
+    method are needed, the unmasked one also records the masked grid's values (snapshots of
+    the same lasso path, or the same OMP run) and the masked one solves only the patches with
+    a masked entry. The fully valid patches' masked codes are then the unmasked ones: the same
+    problem, solved with the Gram matrix ``D D^T`` (BLAS ``syrk``) instead of the masked group's
+    ``(D diag(1)) D^T`` (``gemm``), which differ in their last bits.
+
     Returns ``plans`` (per encoder, one key ``(method, masked, value, split)`` per parameter)
     and ``codes`` (``(method, masked, value)`` -> unsplit codes).
     """
@@ -400,11 +408,16 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
         plans[enc] = [(method, masked, v, pol) for v in values]
         bucket = needed.setdefault((method, masked), [])
         bucket.extend(v for v in values if v not in bucket)
+    # masked lasso / OMP whose unmasked partner runs too: the partner codes the fully valid rows
+    paired = {meth for meth, masked in needed
+              if masked and meth in ("lasso", "omp") and (meth, False) in needed}
+    full = np.all(np.asarray(M, dtype=bool), axis=1) if paired else None
     codes = {}
     grams: dict = {}  # the masked Gram matrices of mask groups, for the masked lasso and OMP
     B = None  # X @ D.T in float64, computed once for every lasso and OMP computation
     zero_masked = None  # masked ones too, when the masked entries of X are 0 (they should be)
-    for (method, masked), values in needed.items():
+    # unmasked computations first: their codes of the fully valid rows serve the masked ones
+    for (method, masked), values in sorted(needed.items(), key=lambda kv: kv[0][1]):
         c0 = time.process_time()
         shared = None
         if method in ("lasso", "omp"):
@@ -415,13 +428,38 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
                     D64 = np.asarray(rep.dictionary, dtype=np.float64)
                     B = np.asarray(X, dtype=np.float64) @ D64.T
                 shared = B
-        for v, A in zip(values, _method_codes(X, M, rep, method, masked, values, shared,
-                                              grams if masked else None), strict=True):
-            codes[(method, masked, v)] = A
+        if method in paired and not masked:
+            run = list(dict.fromkeys([*values, *needed[(method, True)]]))
+            for v, A in zip(run, _method_codes(X, M, rep, method, False, run, shared),
+                            strict=True):
+                codes[(method, False, v)] = A
+        elif method in paired:
+            codes.update(_masked_with_full_rows(X, M, rep, method, values, shared, grams, full,
+                                                codes))
+        else:
+            for v, A in zip(values, _method_codes(X, M, rep, method, masked, values, shared,
+                                                  grams if masked else None), strict=True):
+                codes[(method, masked, v)] = A
         if cpu_seconds is not None:
             key = (method, masked)
             cpu_seconds[key] = cpu_seconds.get(key, 0.0) + time.process_time() - c0
     return plans, codes
+
+
+def _masked_with_full_rows(X, M, rep, method, values, shared, grams, full, codes) -> dict:
+    """Masked codes for ``values``: the fully valid rows (``full``) from the unmasked
+    computation's ``codes`` (which recorded ``values``), the others solved masked."""
+    rest = np.flatnonzero(~full)
+    out = {}
+    for v in values:
+        A = codes[(method, False, v)].copy()  # right for the fully valid rows
+        out[(method, True, v)] = A
+    if rest.size:
+        sub = _method_codes(X[rest], M[rest], rep, method, True, values,
+                            None if shared is None else shared[rest], grams)
+        for v, A in zip(values, sub, strict=True):
+            out[(method, True, v)][rest] = A
+    return out
 
 
 def encode_patches_grid(X, M, rep: Representation, encoder: str, params,
