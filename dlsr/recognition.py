@@ -538,7 +538,7 @@ def nested_cv_cells(
     n_patches: int = 100_000,
     extra=None,
     random_state: int = 0,
-    n_jobs: int = 1,
+    n_jobs: int | None = 1,
     representations: dict | None = None,
     representation_dir=None,
     fold_dir=None,
@@ -571,8 +571,11 @@ def nested_cv_cells(
     random_state : int
         Fold ``k``'s representation is seeded from ``random_state`` and ``k`` only, so a cell's
         result does not depend on which other cells run with it.
-    n_jobs : int
+    n_jobs : int or None
         Workers (joblib; the active joblib backend, Ray included, when set by the caller).
+        None takes the worker count of the active ``joblib.parallel_config`` too (1 outside
+        one): a caller's executor (``graspsim.executor.Executor.activate``) then decides both
+        where and how many. The results do not depend on it.
     representations : dict or None
         Cache ``{(learner, fold index): Representation}``, filled in place when given.
     representation_dir : path or None
@@ -873,7 +876,7 @@ def run_recognition_benchmark(
     n_patches: int = 100_000,
     extra=None,
     random_state: int = 0,
-    n_jobs: int = 1,
+    n_jobs: int | None = 1,
     progress: bool = True,
     figure5_sizes: Sequence[int] | None = None,
 ) -> dict:
@@ -885,7 +888,8 @@ def run_recognition_benchmark(
     (learner, outer fold) tasks (``out_dir/folds/<configuration key>/``) are reused, so an
     interrupted run loses at most the folds in progress. The progress bar counts those tasks
     (with tqdm's estimate of the time left) and shows the cells finished. Every (learner,
-    outer fold) is one task of one worker pool (:func:`nested_cv_cells`). At the end it writes
+    outer fold) is one task of one worker pool (:func:`nested_cv_cells`; ``n_jobs`` as there: None
+    defers to the active joblib configuration, a caller's executor). At the end it writes
     ``recognition.json`` and ``table1.md``.
     Wall and worker CPU seconds are recorded per fold, per cell and for the run (CPU time divided
     by the cores is what the run costs on an otherwise idle machine).

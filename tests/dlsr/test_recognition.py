@@ -523,3 +523,21 @@ def test_encoders_sharing_features_run_one_inner_cv_and_one_refit(separable, mon
     if both["SC"]["encoder_param"] == rep.natural_param and both["SC"]["C"] == \
             both["Natural"]["C"]:
         assert both["SC"]["predictions"] == both["Natural"]["predictions"]
+
+
+def test_cells_run_on_the_callers_joblib_backend_with_the_same_results(separable):
+    """With ``n_jobs=None`` the (learner, outer fold) tasks go to the active joblib
+    configuration (what an executor's ``activate`` sets: local processes here, Ray alike);
+    every cell is the same as in one process."""
+    from joblib import parallel_config
+
+    kw = dict(split="image", n_folds=3, inner_folds=2, random_state=0, **SMALL)
+    cells = [("NKM", "ST"), ("GSVQ", "Natural")]
+    alone = list(rec.nested_cv_cells(separable, cells, n_jobs=1, **kw))
+    with parallel_config(backend="loky", n_jobs=2):
+        pooled = list(rec.nested_cv_cells(separable, cells, n_jobs=None, **kw))
+    by = {(c["learner"], c["encoder"]): c for c in pooled}
+    for cell in alone:
+        other = by[(cell["learner"], cell["encoder"])]
+        for key in ("encoder_param", "C", "inner_accuracy", "predictions", "accuracy"):
+            assert [f[key] for f in cell["folds"]] == [f[key] for f in other["folds"]], key
