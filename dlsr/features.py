@@ -315,6 +315,19 @@ def _encoder_plan(rep: Representation, encoder: str, params):
     return method, masked, values, True
 
 
+def _padding_masks(M):
+    """Each flattened patch's padding pattern: its K channel's mask (the image mask, padding
+    only; the depth and normal channels add the depth holes to it) on every channel, joined
+    with the patch's own mask so that it contains it. Patches of a rectangle's padded border
+    share it; the masked lasso and OMP start their Gram columns from its Gram matrix
+    (:func:`dlsr.coding.lasso_path`, ``base_mask``)."""
+    M = np.asarray(M, dtype=bool)
+    if M.shape[1] != PATCH_SIZE * PATCH_SIZE * N_CHANNELS:
+        return None  # not the paper's patches: no known padding channel
+    image = M[:, 0::N_CHANNELS]  # channels last: (row, column, channel) flattened
+    return np.repeat(image, N_CHANNELS, axis=1) | M
+
+
 def _method_codes(X, M, rep: Representation, method: str, masked: bool, values,
                   correlations=None, gram_cache=None) -> list:
     """Codes of one computation for each of ``values`` (in that order), unsplit.
@@ -325,12 +338,13 @@ def _method_codes(X, M, rep: Representation, method: str, masked: bool, values,
     """
     D = rep.dictionary
     mask = M if masked else None
+    base = _padding_masks(M) if masked and method in ("lasso", "omp") else None
     if method == "lasso":
         return list(coding.lasso_path(X, D, values, mask=mask, correlations=correlations,
-                                      gram_cache=gram_cache))
+                                      gram_cache=gram_cache, base_mask=base))
     if method == "omp":
         return list(coding.omp_path(X, D, values, mask=mask, correlations=correlations,
-                                    gram_cache=gram_cache))
+                                    gram_cache=gram_cache, base_mask=base))
     if method == "threshold":
         return list(coding.soft_threshold_path(X, D, values))
     atoms = rep.centroids if rep.centroids is not None else D
