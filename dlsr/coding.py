@@ -125,6 +125,19 @@ def _check_xd(X, D, mask=None, name="X", check_finite_x=True):
     return X, D, mask
 
 
+def _check_base(base_mask, mask):
+    """``base_mask`` as bool, checked to contain ``mask`` (None without either)."""
+    if base_mask is None or mask is None:
+        return None
+    base = np.asarray(base_mask, dtype=bool)
+    if base.shape != mask.shape:
+        raise ValueError(f"base_mask must have the shape of the mask {mask.shape}, got "
+                         f"{base.shape}")
+    if np.any(mask & ~base):
+        raise ValueError("base_mask must contain the mask: True wherever the mask is")
+    return base
+
+
 def _chunks(n, size):
     for start in range(0, n, size):
         yield slice(start, min(start + size, n))
@@ -146,13 +159,20 @@ class _SharedGram:
 
 class _MaskedGram:
     """Each row r has its own ``G_r = D diag(m_r) D^T``; never formed (the compiled solvers
-    compute the masked Gram column of each atom they select)."""
+    compute the masked Gram column of each atom they select).
 
-    def __init__(self, M):
+    With ``G`` given (the Gram matrix of a base mask ``q`` the rows' masks lie in), ``M`` holds
+    ``m_r | ~q``: a column is then ``G[:, j]`` minus the terms of the entries masked within
+    ``q`` only; otherwise (``G`` None) ``M`` holds the masks and the solvers start from the
+    unmasked Gram matrix.
+    """
+
+    def __init__(self, M, G=None):
         self.M = M
+        self.G64 = G
 
     def subset(self, rows):
-        return _MaskedGram(self.M[rows])
+        return _MaskedGram(self.M[rows], self.G64)
 
 
 # --------------------------------------------------------------------------------------------
@@ -250,13 +270,31 @@ def _group_gram(D64, m, cache):
     return G
 
 
+def _base_groups(mask, base, rest, min_group):
+    """Rows of ``rest`` grouped by their base mask (``base[r]``, containing ``mask[r]``):
+    ``(groups, left)``, each group at least ``min_group`` rows whose masks leave at most half
+    the entries of the row masked within the base (the compiled solvers then subtract those
+    entries' terms from the base's Gram column; with more, they sum the valid ones, which only
+    the plain masked rows, ``left``, can)."""
+    if base is None or not rest.size:
+        return [], rest
+    holes = np.count_nonzero(base[rest] & ~mask[rest], axis=1)
+    fit = holes * 2 <= mask.shape[1]
+    groups, small = _group_by_mask(base[rest[fit]], min_group)
+    left = np.sort(np.r_[rest[~fit], rest[fit][small]])
+    return [rest[fit][g] for g in groups], left
+
+
 def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs, n_paths, dtype,
-                  gram_cache=None):
+                  gram_cache=None, base=None):
     """Run ``solver(rows, op, out)`` over chunks of rows sharing a Gram operator.
 
     Rows sharing one mask (at least ``min_group`` of them) get that mask's Gram matrix (kept in
     ``gram_cache`` when given, for the next masked solve on the same dictionary); the rest
-    get per-row masked products. With ``n_jobs > 1`` chunks run in threads (numpy and the
+    get per-row masked products. With ``base`` (a base mask per row containing its mask, e.g.
+    its padding pattern), the rest sharing a base (``min_group`` of them) start their columns
+    from the base's Gram matrix and subtract only the entries masked within it
+    (:func:`_base_groups`). With ``n_jobs > 1`` chunks run in threads (numpy and the
     compiled kernels release the GIL) with single-threaded BLAS in each. ``solver`` writes the
     codes of its rows into ``out``, of shape ``(n_paths, n, d)``, zero-initialised and returned
     (the compiled kernels write there directly: per-chunk result arrays, their reordering and
@@ -277,6 +315,13 @@ def _solve_groups(X, D, mask, chunk_size, min_group, solver, n_jobs, n_paths, dt
     for rows, op in zip(groups, ops, strict=True):
         for sl in _chunks(rows.size, chunk_size):
             tasks.append((rows[sl], op))
+    if mask is not None:
+        based, rest = _base_groups(mask, base, rest, min_group)
+        for rows in based:
+            G_base = _group_gram(D64, base[rows[0]], cache)
+            bop = _MaskedGram((mask[rows] | ~base[rows]), G_base)
+            for sl in _chunks(rows.size, chunk_size):
+                tasks.append((rows[sl], bop.subset(sl)))
     if rest.size:
         mop = _MaskedGram(mask)
         for sl in _chunks(rest.size, chunk_size):
@@ -340,7 +385,7 @@ def _check_lams(lam, name="lam"):
 
 def lasso_path(
     X, D, lams, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP, dtype=np.float32,
-    max_steps=None, correlations=None, gram_cache=None,
+    max_steps=None, correlations=None, gram_cache=None, base_mask=None,
 ):
     """Lasso codes of every row of ``X`` for several penalties, from one homotopy path.
 
@@ -381,6 +426,13 @@ def lasso_path(
         call on the same dictionary: the masked lasso and the masked OMP of the same patches
         form the same ones (about 4 % of the two on a chunk of real patches). It refuses
         another dictionary; without a mask it is not used.
+    base_mask : array-like of shape (n, p), bool, optional
+        Per row, a mask containing ``mask`` (True wherever ``mask`` is), shared by many rows:
+        a rectangle's padding pattern, of which the depth holes are a few more masked entries.
+        Rows whose masks share no Gram matrix but share a base (``min_group`` of them) start
+        each masked Gram column from the base's and subtract only the entries masked within
+        it, instead of every masked entry from ``D D^T``: the same columns, summed in another
+        order (last bits). Ignored without ``mask``.
 
     Returns
     -------
@@ -390,6 +442,7 @@ def lasso_path(
     from dlsr._homotopy import lasso_path_rows
 
     X, D, mask = _check_xd(X, D, mask)
+    base = _check_base(base_mask, mask)
     lams = _check_lams(lams, "lams")
     n, p = X.shape
     d = D.shape[0]
@@ -415,7 +468,8 @@ def lasso_path(
             lasso_path_rows(B, L, op.G64, Dt, no_M, False, out, idx, slots, ok, max_steps, 1e-9)
         else:
             M = np.ascontiguousarray(op.M, dtype=np.float64)
-            lasso_path_rows(B, L, G_full, Dt, M, True, out, idx, slots, ok, max_steps, 1e-9)
+            G = G_full if op.G64 is None else op.G64
+            lasso_path_rows(B, L, G, Dt, M, True, out, idx, slots, ok, max_steps, 1e-9)
         if not ok.all():  # rare degenerate rows: scikit-learn's LARS per row and penalty
             rows = idx[~ok]
             for t, lam_t in enumerate(levels):
@@ -424,7 +478,7 @@ def lasso_path(
                     None if mask is None else mask[rows])
 
     return fill(_solve_groups(X, D64, mask, chunk_size, min_group, solver, n_jobs,
-                              where.size, dtype, gram_cache))
+                              where.size, dtype, gram_cache, base))
 
 
 def lasso(
@@ -538,7 +592,7 @@ def omp_rowwise(X, D, n_nonzero, mask=None):
 
 
 def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP,
-             dtype=np.float32, correlations=None, gram_cache=None):
+             dtype=np.float32, correlations=None, gram_cache=None, base_mask=None):
     """OMP codes for several numbers of atoms from one greedy run.
 
     OMP's selection does not depend on the final number of atoms, so one run to the largest
@@ -552,7 +606,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
     n_nonzeros : int or sequence of int
         Numbers of atoms, >= 1, in any order.
     mask : array-like of shape (n, p), bool, optional
-    n_jobs, chunk_size, min_group, dtype, correlations, gram_cache
+    n_jobs, chunk_size, min_group, dtype, correlations, gram_cache, base_mask
         As in :func:`lasso_path`.
 
     Returns
@@ -560,6 +614,7 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
     A : ndarray of shape (len(n_nonzeros), n, d)
     """
     X, D, mask = _check_xd(X, D, mask)
+    base = _check_base(base_mask, mask)
     Ls = np.atleast_1d(np.asarray(n_nonzeros))
     if (Ls.ndim != 1 or Ls.size == 0 or not np.issubdtype(Ls.dtype, np.number)
             or np.any(Ls != np.round(Ls)) or np.any(Ls < 1)):
@@ -583,10 +638,11 @@ def omp_path(X, D, n_nonzeros, mask=None, *, n_jobs=None, chunk_size=1024, min_g
             omp_path_rows(B, op.G64, Dt, no_M, False, stops_c, out, idx, slots, _TINY)
         else:
             M = np.ascontiguousarray(op.M, dtype=np.float64)
-            omp_path_rows(B, G_full, Dt, M, True, stops_c, out, idx, slots, _TINY)
+            G = G_full if op.G64 is None else op.G64
+            omp_path_rows(B, G, Dt, M, True, stops_c, out, idx, slots, _TINY)
 
     return fill(_solve_groups(X, D64, mask, chunk_size, min_group, solver, n_jobs,
-                              where.size, dtype, gram_cache))
+                              where.size, dtype, gram_cache, base))
 
 
 def omp(X, D, n_nonzero, mask=None, *, n_jobs=None, chunk_size=1024, min_group=MIN_GROUP,

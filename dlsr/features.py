@@ -315,6 +315,19 @@ def _encoder_plan(rep: Representation, encoder: str, params):
     return method, masked, values, True
 
 
+def _padding_masks(M):
+    """Each flattened patch's padding pattern: its K channel's mask (the image mask, padding
+    only; the depth and normal channels add the depth holes to it) on every channel, joined
+    with the patch's own mask so that it contains it. Patches of a rectangle's padded border
+    share it; the masked lasso and OMP start their Gram columns from its Gram matrix
+    (:func:`dlsr.coding.lasso_path`, ``base_mask``)."""
+    M = np.asarray(M, dtype=bool)
+    if M.shape[1] != PATCH_SIZE * PATCH_SIZE * N_CHANNELS:
+        return None  # not the paper's patches: no known padding channel
+    image = M[:, 0::N_CHANNELS]  # channels last: (row, column, channel) flattened
+    return np.repeat(image, N_CHANNELS, axis=1) | M
+
+
 def _method_codes(X, M, rep: Representation, method: str, masked: bool, values,
                   correlations=None, gram_cache=None) -> list:
     """Codes of one computation for each of ``values`` (in that order), unsplit.
@@ -325,12 +338,13 @@ def _method_codes(X, M, rep: Representation, method: str, masked: bool, values,
     """
     D = rep.dictionary
     mask = M if masked else None
+    base = _padding_masks(M) if masked and method in ("lasso", "omp") else None
     if method == "lasso":
         return list(coding.lasso_path(X, D, values, mask=mask, correlations=correlations,
-                                      gram_cache=gram_cache))
+                                      gram_cache=gram_cache, base_mask=base))
     if method == "omp":
         return list(coding.omp_path(X, D, values, mask=mask, correlations=correlations,
-                                    gram_cache=gram_cache))
+                                    gram_cache=gram_cache, base_mask=base))
     if method == "threshold":
         return list(coding.soft_threshold_path(X, D, values))
     atoms = rep.centroids if rep.centroids is not None else D
@@ -387,6 +401,14 @@ def encode_patches_multi(X, M, rep: Representation, grids: dict, polarity: bool 
 def _multi_codes(X, M, rep, grids, cpu_seconds):
     """Unsplit codes of each computation the encoders need, each computed once.
 
+    A fully valid patch's masked lasso (penalty scaled by ``||m||_0 / p = 1``) and masked OMP
+    are the unmasked problems, so when both the masked and the unmasked computation of a
+    method are needed, the unmasked one also records the masked grid's values (snapshots of
+    the same lasso path, or the same OMP run) and the masked one solves only the patches with
+    a masked entry. The fully valid patches' masked codes are then the unmasked ones: the same
+    problem, solved with the Gram matrix ``D D^T`` (BLAS ``syrk``) instead of the masked group's
+    ``(D diag(1)) D^T`` (``gemm``), which differ in their last bits.
+
     Returns ``plans`` (per encoder, one key ``(method, masked, value, split)`` per parameter)
     and ``codes`` (``(method, masked, value)`` -> unsplit codes).
     """
@@ -400,11 +422,16 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
         plans[enc] = [(method, masked, v, pol) for v in values]
         bucket = needed.setdefault((method, masked), [])
         bucket.extend(v for v in values if v not in bucket)
+    # masked lasso / OMP whose unmasked partner runs too: the partner codes the fully valid rows
+    paired = {meth for meth, masked in needed
+              if masked and meth in ("lasso", "omp") and (meth, False) in needed}
+    full = np.all(np.asarray(M, dtype=bool), axis=1) if paired else None
     codes = {}
     grams: dict = {}  # the masked Gram matrices of mask groups, for the masked lasso and OMP
     B = None  # X @ D.T in float64, computed once for every lasso and OMP computation
     zero_masked = None  # masked ones too, when the masked entries of X are 0 (they should be)
-    for (method, masked), values in needed.items():
+    # unmasked computations first: their codes of the fully valid rows serve the masked ones
+    for (method, masked), values in sorted(needed.items(), key=lambda kv: kv[0][1]):
         c0 = time.process_time()
         shared = None
         if method in ("lasso", "omp"):
@@ -415,13 +442,38 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
                     D64 = np.asarray(rep.dictionary, dtype=np.float64)
                     B = np.asarray(X, dtype=np.float64) @ D64.T
                 shared = B
-        for v, A in zip(values, _method_codes(X, M, rep, method, masked, values, shared,
-                                              grams if masked else None), strict=True):
-            codes[(method, masked, v)] = A
+        if method in paired and not masked:
+            run = list(dict.fromkeys([*values, *needed[(method, True)]]))
+            for v, A in zip(run, _method_codes(X, M, rep, method, False, run, shared),
+                            strict=True):
+                codes[(method, False, v)] = A
+        elif method in paired:
+            codes.update(_masked_with_full_rows(X, M, rep, method, values, shared, grams, full,
+                                                codes))
+        else:
+            for v, A in zip(values, _method_codes(X, M, rep, method, masked, values, shared,
+                                                  grams if masked else None), strict=True):
+                codes[(method, masked, v)] = A
         if cpu_seconds is not None:
             key = (method, masked)
             cpu_seconds[key] = cpu_seconds.get(key, 0.0) + time.process_time() - c0
     return plans, codes
+
+
+def _masked_with_full_rows(X, M, rep, method, values, shared, grams, full, codes) -> dict:
+    """Masked codes for ``values``: the fully valid rows (``full``) from the unmasked
+    computation's ``codes`` (which recorded ``values``), the others solved masked."""
+    rest = np.flatnonzero(~full)
+    out = {}
+    for v in values:
+        A = codes[(method, False, v)].copy()  # right for the fully valid rows
+        out[(method, True, v)] = A
+    if rest.size:
+        sub = _method_codes(X[rest], M[rest], rep, method, True, values,
+                            None if shared is None else shared[rest], grams)
+        for v, A in zip(values, sub, strict=True):
+            out[(method, True, v)][rest] = A
+    return out
 
 
 def encode_patches_grid(X, M, rep: Representation, encoder: str, params,
@@ -495,6 +547,8 @@ def rectangle_features_multi(
     -------
     dict
         ``{encoder: list of ndarray of shape (n, 4 * k), float32}``, one per parameter.
+        Encoders that read the same codes (SC-Natural and SC at the dictionary's penalty, for
+        example) share the same array object, written once.
     """
     images = np.asarray(images, dtype=np.float32)
     masks = np.asarray(masks, dtype=bool)
@@ -529,12 +583,12 @@ def rectangle_features_multi(
                     if key not in pooled:
                         pooled[key] = _split_pool(codes[key[:3]].reshape(b, side, side, -1),
                                                   bool(polarity and key[3]))
-            if out is None:
-                out = {enc: [np.empty((n, pooled[key].shape[1]), dtype=np.float32) for key in keys]
-                       for enc, keys in plans.items()}
-            for enc, keys in plans.items():
-                for t, key in enumerate(keys):
-                    out[enc][t][start:start + b] = pooled[key]
+            if out is None:  # encoders reading the same codes share one array
+                arrays = {key: np.empty((n, pooled[key].shape[1]), dtype=np.float32)
+                          for key in pooled}
+                out = {enc: [arrays[key] for key in keys] for enc, keys in plans.items()}
+            for key, pooled_key in pooled.items():
+                arrays[key][start:start + b] = pooled_key
             acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
     return out
 

@@ -323,12 +323,13 @@ def _fold_task(key, data, train, test, rep, rep_args, encoders, groups, inner_fo
     return key, fitted, cpu, wall, stages, results
 
 
-def _fit_svms(F, y, C_grid):
+def _fit_svms(F, y, C_grid, start=None):
     """Standardise on ``F`` and fit one SVM per C, all with one solver call.
 
-    The C values share the standardiser and the solver's kernel, each warm-started from the
-    previous one (:func:`dlsr.svm.squared_hinge_fit`); each fit is the one
-    ``SquaredHingeSVC(C=C)`` makes on the standardised features.
+    The C values share the standardiser and the solver's kernel or Gram matrix, each
+    warm-started from the previous one (:func:`dlsr.svm.squared_hinge_fit`); each fit is the
+    one ``SquaredHingeSVC(C=C)`` makes on the standardised features, up to rounding when
+    ``start`` is given.
 
     Parameters
     ----------
@@ -336,41 +337,82 @@ def _fit_svms(F, y, C_grid):
     y : ndarray of shape (n_samples,)
         Two classes.
     C_grid : sequence of float
+    start : tuple (w, b) or None
+        Where the first C starts, in the coordinates of ``F`` itself (decision ``F @ w + b``):
+        a neighbouring problem's solution, e.g. the previous inner fold's (``raw`` below). It
+        is mapped through this fold's standardisation; it changes the solver's path, not the
+        minimiser.
 
     Returns
     -------
     predict : callable
         ``predict(F_new)`` is the list, one per C, of the predicted labels of ``F_new``
         (ndarray of shape (n_new,)).
+    raw : list of tuple
+        Per C, the solution ``(w, b)`` in the coordinates of ``F`` (float64).
     """
     scaler = FeatureStandardizer().fit(F)
+    mean = scaler.mean_.astype(np.float64)
+    scale = scaler.scale_.astype(np.float64)
     classes = np.unique(y)
     y_pm = np.where(y == classes[1], 1.0, -1.0)
-    fits = squared_hinge_fit(scaler.transform(F), y_pm, C_grid)
+    if start is not None:  # F @ w + b = Z @ (w * scale) + (b + mean @ w) with Z standardised
+        w_raw, b_raw = start
+        start = (w_raw * scale, b_raw + mean @ w_raw)
+    fits = squared_hinge_fit(scaler.transform(F), y_pm, C_grid, start=start)
+    raw = []
+    for w, b, _ in fits:
+        w_raw = w / scale
+        raw.append((w_raw, float(b - mean @ w_raw)))
 
     def predict(F_new):
         Z = scaler.transform(F_new)
         return [classes[(Z @ w + b > 0).astype(int)] for w, b, _ in fits]
 
-    return predict
+    return predict, raw
 
 
-def _choose(feats_tr, y_tr, inner, C_grid):
+def _inner_scores(Ftr, y_tr, inner, C_grid):
+    """Per C, the inner folds' validation accuracies of one encoder parameter, and per C the
+    last inner fold's solution in the coordinates of ``Ftr`` (a start for the outer refit).
+
+    Each inner fold starts from its neighbour's solution (the previous fold's, first C): the
+    folds share most of their rows, so its violators are nearly the final ones and fewer
+    kernel entries or Gram updates and Newton steps are needed than from a cold start.
+    """
+    accs = [[] for _ in C_grid]
+    start = last = None
+    for itr, iva in inner:
+        if len(np.unique(y_tr[itr])) < 2:
+            continue
+        predict, raw = _fit_svms(Ftr[itr], y_tr[itr], C_grid, start=start)
+        start, last = raw[0], raw
+        for acc, pred in zip(accs, predict(Ftr[iva]), strict=True):
+            acc.append(np.mean(pred == y_tr[iva]))
+    return accs, last
+
+
+def _choose(feats_tr, y_tr, inner, C_grid, memo=None):
     """Inner CV over (encoder param, C) on the outer training fold: ``(score, param, C)``.
 
     ``feats_tr`` maps each encoder parameter to its training features. Per parameter and
-    inner fold, the C values are fitted together (one standardiser, one kernel); candidates are
+    inner fold, the C values are fitted together (one standardiser, one kernel), each inner
+    fold starting from its neighbour's solution (:func:`_inner_scores`); candidates are
     compared in order (parameters, then C), a later one winning only if better by > 1e-12.
+
+    ``memo`` (a dict, for one ``y_tr``, ``inner`` and ``C_grid``) keeps each feature array's
+    inner CV by the array's identity: encoders that read the same features (SC and
+    SC-Natural, OMP and OMP-Natural, mOMP and GSVQ-Natural share one array,
+    :func:`dlsr.features.rectangle_features_multi`) run it once.
     """
     best = None
     for param, Ftr in feats_tr.items():
-        accs = [[] for _ in C_grid]
-        for itr, iva in inner:
-            if len(np.unique(y_tr[itr])) < 2:
-                continue
-            preds = _fit_svms(Ftr[itr], y_tr[itr], C_grid)(Ftr[iva])
-            for acc, pred in zip(accs, preds, strict=True):
-                acc.append(np.mean(pred == y_tr[iva]))
+        hit = None if memo is None else memo.get(id(Ftr))
+        if hit is None:
+            hit = (Ftr, *_inner_scores(Ftr, y_tr, inner, C_grid))  # holds Ftr: id stays its
+            if memo is not None:
+                memo[id(Ftr)] = hit
+        _, accs, _ = hit
         for C, acc in zip(C_grid, accs, strict=True):
             score = float(np.mean(acc)) if acc else -np.inf
             if best is None or score > best[0] + 1e-12:
@@ -378,11 +420,11 @@ def _choose(feats_tr, y_tr, inner, C_grid):
     return best
 
 
-def _test(Ftr, Fte, y_tr, y_te, choice):
+def _test(Ftr, Fte, y_tr, y_te, choice, start=None):
     """The outer fit on the whole training fold with the chosen ``(score, param, C)`` and its
-    test accuracy."""
+    test accuracy; ``start`` as in :func:`_fit_svms`."""
     score, param, C = choice
-    (pred,) = _fit_svms(Ftr, y_tr, [C])(Fte)
+    (pred,) = _fit_svms(Ftr, y_tr, [C], start=start)[0](Fte)
     return {
         "accuracy": float(np.mean(pred == y_te)),
         "n_test": int(len(y_te)),
@@ -420,10 +462,11 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
     feature_cpu = time.process_time() - c0
     feature_wall = time.perf_counter() - t0
     feats_tr, choices = {}, {}
+    memo: dict = {}  # inner CVs by feature array: encoders sharing an array run it once
     for enc in encoders:
         t1, c1 = time.perf_counter(), time.process_time()
         feats_tr[enc] = dict(zip(grids[enc], Ftr[enc], strict=True))
-        choices[enc] = _choose(feats_tr[enc], y_tr, inner, tuple(C_grid))
+        choices[enc] = _choose(feats_tr[enc], y_tr, inner, tuple(C_grid), memo)
         own[enc][0] += time.perf_counter() - t1
         own[enc][1] += time.process_time() - c1
     t0, c0 = time.perf_counter(), time.process_time()
@@ -443,9 +486,19 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
         for enc in encs:
             share[enc] += cpu.get(key, 0.0) / len(encs)
     results = {}
+    refits: dict = {}  # outer refits by (training array, test array, C): shared arrays once
     for enc in encoders:
         t1, c1 = time.perf_counter(), time.process_time()
-        res = _test(feats_tr[enc][choices[enc][1]], Fte[enc][0], y_tr, y_te, choices[enc])
+        F_enc, C = feats_tr[enc][choices[enc][1]], choices[enc][2]
+        key = (id(F_enc), id(Fte[enc][0]), C)
+        if key not in refits:
+            # the last inner fold's solution at this C starts the refit (mostly its rows)
+            last = memo[id(F_enc)][2]  # None when no inner fold had both classes
+            start = None if last is None else last[list(C_grid).index(C)]
+            refits[key] = (F_enc, Fte[enc][0],
+                           _test(F_enc, Fte[enc][0], y_tr, y_te, choices[enc], start=start))
+        res = {**refits[key][2], "encoder_param": choices[enc][1],
+               "inner_accuracy": choices[enc][0]}
         wall_share = feature_wall * share[enc] / max(feature_cpu, 1e-12)
         res["svm_seconds"] = own[enc][0] + time.perf_counter() - t1  # inner CV and refit
         res["coding_seconds"] = wall_share
@@ -485,7 +538,7 @@ def nested_cv_cells(
     n_patches: int = 100_000,
     extra=None,
     random_state: int = 0,
-    n_jobs: int = 1,
+    n_jobs: int | None = 1,
     representations: dict | None = None,
     representation_dir=None,
     fold_dir=None,
@@ -518,8 +571,11 @@ def nested_cv_cells(
     random_state : int
         Fold ``k``'s representation is seeded from ``random_state`` and ``k`` only, so a cell's
         result does not depend on which other cells run with it.
-    n_jobs : int
+    n_jobs : int or None
         Workers (joblib; the active joblib backend, Ray included, when set by the caller).
+        None takes the worker count of the active ``joblib.parallel_config`` too (1 outside
+        one): a caller's executor (``graspsim.executor.Executor.activate``) then decides both
+        where and how many. The results do not depend on it.
     representations : dict or None
         Cache ``{(learner, fold index): Representation}``, filled in place when given.
     representation_dir : path or None
@@ -820,7 +876,7 @@ def run_recognition_benchmark(
     n_patches: int = 100_000,
     extra=None,
     random_state: int = 0,
-    n_jobs: int = 1,
+    n_jobs: int | None = 1,
     progress: bool = True,
     figure5_sizes: Sequence[int] | None = None,
 ) -> dict:
@@ -832,7 +888,8 @@ def run_recognition_benchmark(
     (learner, outer fold) tasks (``out_dir/folds/<configuration key>/``) are reused, so an
     interrupted run loses at most the folds in progress. The progress bar counts those tasks
     (with tqdm's estimate of the time left) and shows the cells finished. Every (learner,
-    outer fold) is one task of one worker pool (:func:`nested_cv_cells`). At the end it writes
+    outer fold) is one task of one worker pool (:func:`nested_cv_cells`; ``n_jobs`` as there: None
+    defers to the active joblib configuration, a caller's executor). At the end it writes
     ``recognition.json`` and ``table1.md``.
     Wall and worker CPU seconds are recorded per fold, per cell and for the run (CPU time divided
     by the cores is what the run costs on an otherwise idle machine).

@@ -46,7 +46,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-from scipy.linalg import lapack, lstsq
+from scipy.linalg import blas, lapack, lstsq
 from scipy.optimize import minimize
 from sklearn.base import BaseEstimator, ClassifierMixin, TransformerMixin
 from sklearn.exceptions import ConvergenceWarning
@@ -140,20 +140,25 @@ def squared_hinge_objective(params, X, y_pm, C):
 
 # Rows at which a cold start first solves the problem on a quarter of the rows (see _start).
 _SUBSET_MIN_ROWS = 400
-# Rows per block when the primal form sums outer products (bounds the temporary copies).
+# Rows per block when the primal form sums outer products (the size of its one scratch array).
 _BLOCK_ROWS = 4096
 
 
-def _solve_spd(matrix, rhs):
-    """Solve ``A x = rhs`` for the symmetric positive definite ``A = matrix()`` (a fresh array).
+def _solve_spd(matrix, rhs, full=None):
+    """Solve ``A x = rhs`` for the symmetric positive definite ``A = matrix()``.
 
-    Cholesky (LAPACK ``dposv``, overwriting ``A``; ``A.T`` is the Fortran-ordered array it
-    wants, no copy); when ``A`` is not positive definite in floating point (the regularisation
-    below the rounding of its entries), least squares on a second ``matrix()``.
+    Cholesky (LAPACK ``dposv``, overwriting ``A``, reading its lower triangle). ``matrix()``
+    returns an array it may overwrite: a C-ordered symmetric one is passed as ``A.T`` (the
+    Fortran-ordered array LAPACK wants, no copy), a Fortran-ordered one as it is (only its lower
+    triangle need be filled). When ``A`` is not positive definite in floating point (the
+    regularisation below the rounding of its entries), least squares on ``full()`` (a fresh
+    symmetric ``A``; a second ``matrix()`` when not given).
     """
-    _, x, info = lapack.dposv(matrix().T, rhs, lower=1, overwrite_a=1, overwrite_b=0)
+    A = matrix()
+    _, x, info = lapack.dposv(A if A.flags.f_contiguous else A.T, rhs, lower=1, overwrite_a=1,
+                              overwrite_b=0)
     if info != 0:
-        x = lstsq(matrix(), rhs, check_finite=False)[0]
+        x = lstsq((full or matrix)(), rhs, check_finite=False)[0]
     return x
 
 
@@ -233,7 +238,11 @@ class _KernelSystem:
 class _PrimalSystem:
     """Newton systems in primal form (size ``d + 1``), updating ``[X_S 1]^T [X_S 1]`` as S changes.
 
-    Rows are read in blocks of ``_BLOCK_ROWS``, so no copy of ``X`` is made.
+    The Gram matrix is updated in place: the rows that enter or leave are gathered, a block of
+    ``_BLOCK_ROWS`` at a time, into one scratch array ``[x_i 1]`` made once, and BLAS ``dsyrk``
+    adds (or subtracts) their outer products to the lower triangle of ``H`` (Fortran order)
+    directly: no copy of ``X``, no product matrix, no scaled temporary. Each solve copies ``H``
+    into one work array made once, which LAPACK factorises in place.
 
     Parameters
     ----------
@@ -245,25 +254,34 @@ class _PrimalSystem:
     def __init__(self, X, y):
         n, d = X.shape
         self.X, self.y = X, y
-        self._H = np.zeros((d + 1, d + 1))  # [X_S 1]^T [X_S 1] for the rows in _in
+        # [X_S 1]^T [X_S 1] for the rows in _in: lower triangle, Fortran order
+        self._H = np.zeros((d + 1, d + 1), order="F")
+        self._A = None  # H + lam I, factorised in place (made on first solve)
+        self._buf = None  # gathered rows [x_i 1] (made on first use)
         self._in = np.zeros(n, dtype=bool)
 
     def _accumulate(self, rows, sign):
         """Add (``sign`` +1) or subtract (-1) ``[x_i 1]^T [x_i 1]`` over ``rows``."""
         d = self.X.shape[1]
-        H = self._H
-        for start in range(0, len(rows), _BLOCK_ROWS):
-            Z = self.X[rows[start:start + _BLOCK_ROWS]]
-            plus = sign[start:start + _BLOCK_ROWS] > 0
-            for keep, sg in ((plus, 1.0), (~plus, -1.0)):
-                if keep.any():
-                    Zk = Z if keep.all() else Z[keep]
-                    G = Zk.T @ Zk  # symmetric product (BLAS syrk)
-                    col = Zk.sum(axis=0)
-                    H[:d, :d] += sg * G
-                    H[:d, d] += sg * col
-                    H[d, :d] += sg * col
-                    H[d, d] += sg * len(Zk)
+        if self._buf is None:
+            self._buf = np.empty((min(_BLOCK_ROWS, len(self.X)), d + 1))
+            self._buf[:, d] = 1.0
+        for sg in (1.0, -1.0):
+            part = rows[sign > 0] if sg > 0 else rows[sign < 0]
+            for start in range(0, len(part), _BLOCK_ROWS):
+                block = part[start:start + _BLOCK_ROWS]
+                Z = self._buf[:len(block)]
+                np.take(self.X, block, axis=0, out=Z[:, :d], mode="clip")
+                # H += sg Z^T Z on the lower triangle, in place (Z.T: Fortran, no copy)
+                blas.dsyrk(sg, Z.T, beta=1.0, c=self._H, trans=0, lower=1, overwrite_c=1)
+
+    def _full(self, lam):
+        """``H + lam I`` (bias entry unregularised) as a fresh symmetric array."""
+        d = self.X.shape[1]
+        L = np.tril(self._H)
+        A = L + np.tril(L, -1).T
+        A.flat[: d * (d + 2): d + 2] += lam
+        return A
 
     def solve(self, idx, lam, refresh=False):
         """Minimiser ``(w, b)`` of the quadratic on rows ``idx`` (sorted, not empty).
@@ -283,12 +301,15 @@ class _PrimalSystem:
         self._in = S
 
         def matrix():
-            A = self._H.copy()
+            if self._A is None:
+                self._A = np.empty_like(self._H)  # Fortran order, like H
+            A = self._A
+            np.copyto(A, self._H)
             A.flat[: d * (d + 2): d + 2] += lam  # not the bias entry A[d, d]
             return A
 
         y_S = np.where(S, self.y, 0.0)
-        x = _solve_spd(matrix, np.r_[self.X.T @ y_S, y_S.sum()])
+        x = _solve_spd(matrix, np.r_[self.X.T @ y_S, y_S.sum()], full=lambda: self._full(lam))
         return x[:d].copy(), float(x[d])
 
 
@@ -462,7 +483,7 @@ def _start(X, y, C, system, tol, max_iter):
 
 
 def squared_hinge_fit(X, y_pm, Cs, *, tol=1e-6, max_iter=100, form="auto", warm_start=True,
-                      check_input=True):
+                      check_input=True, start=None):
     """Minimise ``0.5 ||w||^2 + C * mean_i max(0, 1 - y_i (w.x_i + b))^2`` for several C.
 
     Newton's method on the violators' regularised least squares with an exact line search
@@ -488,9 +509,14 @@ def squared_hinge_fit(X, y_pm, Cs, *, tol=1e-6, max_iter=100, form="auto", warm_
         "auto" takes the kernel form when ``n_samples <= 2 * n_features``: at ``n`` close to
         ``d`` it is still the cheaper one, since the violators are a fraction of the rows.
     warm_start : bool, default=True
-        Start each C from the previous C's solution; otherwise each C starts cold.
+        Start each C from the previous C's solution; otherwise each C starts cold (the first
+        from ``start`` when given).
     check_input : bool, default=True
         Check shapes, finiteness and labels (callers that validated already may skip it).
+    start : tuple (w, b) or None, default=None
+        Where the first C starts (``w`` of shape (n_features,)), e.g. the solution of a
+        neighbouring problem; None starts cold. Only the path changes: the minimiser is the
+        same, up to rounding.
 
     Returns
     -------
@@ -509,10 +535,10 @@ def squared_hinge_fit(X, y_pm, Cs, *, tol=1e-6, max_iter=100, form="auto", warm_
     # process, a worker, the machine's core count).
     with _threads.limit(1, user_api="blas"):
         return _squared_hinge_fit(X, y_pm, Cs, tol=tol, max_iter=max_iter, form=form,
-                                  warm_start=warm_start, check_input=check_input)
+                                  warm_start=warm_start, check_input=check_input, start=start)
 
 
-def _squared_hinge_fit(X, y_pm, Cs, *, tol, max_iter, form, warm_start, check_input):
+def _squared_hinge_fit(X, y_pm, Cs, *, tol, max_iter, form, warm_start, check_input, start):
     Cs = np.atleast_1d(np.asarray(Cs, dtype=np.float64))
     if Cs.ndim != 1 or not np.all(Cs > 0) or not np.all(np.isfinite(Cs)):
         raise ValueError(f"C must be positive and finite, got {Cs.tolist()}")
@@ -539,15 +565,21 @@ def _squared_hinge_fit(X, y_pm, Cs, *, tol, max_iter, form, warm_start, check_in
                 f"{np.unique(y).tolist() or 'no label'}"
             )
     n, d = X.shape
+    w = b = None
+    if start is not None:
+        w = np.array(start[0], dtype=np.float64)  # a copy: Newton replaces, never mutates it
+        b = float(start[1])
+        if w.shape != (d,) or not (np.all(np.isfinite(w)) and np.isfinite(b)):
+            raise ValueError(f"start must be a finite (w, b) with w of shape {(d,)}, got "
+                             f"shape {w.shape}")
     if form == "auto":
         form = "kernel" if n <= 2 * d else "primal"
     system = _KernelSystem(X, y) if form == "kernel" else _PrimalSystem(X, y)
     g1 = _gradient_reference(X, y, 1.0, sum_sq)  # proportional to C
     out = []
-    w = b = None
-    for C in Cs:
+    for k, C in enumerate(Cs):
         C = float(C)
-        if w is None or not warm_start:
+        if w is None or (k > 0 and not warm_start):
             w, b = _start(X, y, C, system, tol, max_iter)
         w, b, n_iter, converged = _newton(X, y, C, system, None, w, b, g1 * C, tol, max_iter)
         if not converged:

@@ -595,3 +595,64 @@ def test_group_by_mask_partitions_rows_by_identical_mask(p):
     # a rest row has fewer than min_group identical rows
     for r in rest[:50]:
         assert np.sum(np.all(M == M[r], axis=1)) < 20
+
+
+def _padded_masks(rng, n_rows=400, p=288):
+    """Masks like a rectangle's patches: a padding pattern per group of rows (whole pixels of
+    the 6 x 6 x 8 patch masked), plus depth holes of each row (channels 4-7 of a few pixels,
+    of most pixels in every 50th row)."""
+    pixels = p // 8
+    M = np.ones((n_rows, pixels, 8), dtype=bool)
+    for r in range(n_rows):
+        M[r, : 6 * (r % 3)] = False  # 0, 6 or 12 padded pixels: three padding patterns
+        holes = rng.random(pixels) < (0.9 if r % 50 == 0 else 0.15)
+        M[r, holes, 4:] = False
+    return M.reshape(n_rows, p)
+
+
+@pytest.mark.parametrize("path", ["lasso", "omp"])
+def test_base_masks_give_the_same_codes_from_the_base_gram(path, monkeypatch):
+    """Rows sharing a padding pattern start their masked Gram columns from its Gram matrix and
+    subtract only their depth holes: the codes of every row are those computed from D D^T
+    (equal up to rounding, here to float32's resolution), the base Gram matrices are formed,
+    and a row with holes in most pixels keeps the plain computation."""
+    from dlsr import coding as c
+
+    rng = np.random.default_rng(8)
+    M = _padded_masks(rng)
+    X = (rng.standard_normal(M.shape) * M).astype(np.float32)
+    D = rng.standard_normal((40, M.shape[1]))
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    base = np.repeat(M.reshape(len(M), -1, 8)[:, :, :1], 8, axis=2).reshape(M.shape) | M
+    base[::50] = True  # these rows: padding and most depth masked within an all-valid base
+    fn, values = (c.lasso_path, [0.2, 0.5]) if path == "lasso" else (c.omp_path, [1, 5])
+    plain = fn(X, D, values, mask=M)
+    formed = []
+    real = c._group_gram
+
+    def recording(D64, m, cache):
+        formed.append(m.copy())
+        return real(D64, m, cache)
+
+    monkeypatch.setattr(c, "_group_gram", recording)
+    based = fn(X, D, values, mask=M, base_mask=base)
+    np.testing.assert_allclose(based, plain, rtol=0, atol=1e-6)
+    patterns = {b.tobytes() for b in base}
+    assert sum(m.tobytes() in patterns for m in formed) >= 3  # the three padding patterns
+    groups, left = c._base_groups(M, base, np.arange(len(M)), 32)
+    many = np.count_nonzero(base & ~M, axis=1) * 2 > M.shape[1]
+    assert many.any() and set(np.flatnonzero(many)) <= set(left)
+    assert sorted(np.r_[np.concatenate(groups), left]) == list(range(len(M)))
+
+
+def test_a_base_mask_that_does_not_contain_the_mask_is_an_error():
+    from dlsr import coding
+
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((10, 16))
+    D = rng.standard_normal((4, 16))
+    M = rng.random((10, 16)) > 0.3
+    with pytest.raises(ValueError, match="base_mask must contain the mask"):
+        coding.lasso_path(X, D, [0.5], mask=M, base_mask=M & (rng.random((10, 16)) > 0.5))
+    with pytest.raises(ValueError, match="base_mask must have the shape"):
+        coding.omp_path(X, D, [2], mask=M, base_mask=M[:5])

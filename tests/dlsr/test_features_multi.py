@@ -110,3 +110,39 @@ def test_rectangle_features_multi_equals_one_encoder_at_a_time():
         rectangle_features_multi(images, masks, rep, {"XYZ": (1,)})
     with pytest.raises(ValueError, match="at least one encoder parameter"):
         rectangle_features_multi(images, masks, rep, {"SC": ()})
+
+
+@pytest.mark.parametrize(("unmasked", "masked", "method"), [("SC", "mSC", coding.lasso_path),
+                                                            ("OMP", "mOMP", coding.omp_path)])
+def test_fully_valid_rows_take_their_masked_codes_from_the_unmasked_computation(
+        problem, unmasked, masked, method):
+    """With the unmasked encoder beside it, a masked encoder solves only the rows with a masked
+    entry (the same codes as the masked computation of all rows, bit for bit); the fully valid
+    rows get the unmasked computation's codes, the same problem (equal up to rounding: the Gram
+    matrix is D D^T rather than (D diag(1)) D^T). The unmasked codes are those of its own
+    grid: recording the masked grid's penalties too does not change them."""
+    X, M, D = problem
+    rep = Representation("R", D, None, None, None, 0.0)
+    grids = {unmasked: ENCODER_GRIDS[unmasked], masked: ENCODER_GRIDS[masked]}
+    calls = []
+
+    def counting(X_, D_, values, mask=None, **kw):
+        calls.append((None if mask is None else len(mask), list(values)))
+        return method(X_, D_, values, mask=mask, **kw)
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(coding, method.__name__, counting)
+    try:
+        out = encode_patches_multi(X, M, rep, grids, polarity=False)
+    finally:
+        mp.undo()
+    full = M.all(axis=1)
+    assert calls[0][0] is None and set(calls[0][1]) == set(grids[unmasked]) | set(grids[masked])
+    assert calls[1][0] == int((~full).sum())  # the masked solve: only rows with a mask
+    for t, v in enumerate(grids[unmasked]):
+        np.testing.assert_array_equal(out[unmasked][t], method(X, D, [v])[0])
+    for t, v in enumerate(grids[masked]):
+        alone = method(X, D, [v], mask=M)[0]
+        np.testing.assert_array_equal(out[masked][t][~full], alone[~full])
+        np.testing.assert_allclose(out[masked][t][full], alone[full], rtol=0, atol=1e-6)
+        np.testing.assert_array_equal(out[masked][t][full], method(X, D, [v])[0][full])

@@ -485,3 +485,59 @@ def test_test_fold_encoded_at_the_chosen_parameters_only_gives_the_grids_results
         for key in ("encoder_param", "C", "inner_accuracy", "predictions", "accuracy"):
             assert got[enc][key] == want[key], (enc, key)
 
+
+
+def test_encoders_sharing_features_run_one_inner_cv_and_one_refit(separable, monkeypatch):
+    """SC-Natural reads the SC lasso codes at the dictionary's penalty: the same feature
+    arrays, so its inner CV and refit are SC's at that penalty, run once. Its record is the
+    one it gets alone."""
+    groups = separable.groups("image")
+    train, test = rec.outer_folds(groups, 3, separable.labels)[0]
+    rep = fit_representation(separable.images[train], separable.masks[train], "SC",
+                             random_state=0, **SMALL)
+    assert rep.natural_param in ENCODER_GRIDS["SC"]
+    calls, fits = [], []
+    real_scores, real_fit = rec._inner_scores, rec._fit_svms
+
+    def scores(Ftr, *a):
+        calls.append(id(Ftr))
+        return real_scores(Ftr, *a)
+
+    def fit(F, y, C_grid, start=None):
+        fits.append(start is not None)
+        return real_fit(F, y, C_grid, start=start)
+
+    monkeypatch.setattr(rec, "_inner_scores", scores)
+    monkeypatch.setattr(rec, "_fit_svms", fit)
+    both = rec._learner_fold(separable, train, test, rep, ["SC", "Natural"], groups, 2,
+                             rec.C_GRID)
+    assert len(calls) == len(set(calls)) == len(ENCODER_GRIDS["SC"])  # Natural's: a repeat
+    # every inner fold but the first starts from its neighbour; refits from the last fold
+    per_param = [False, True]
+    assert fits[:8] == per_param * 4
+    calls.clear()
+    alone = rec._learner_fold(separable, train, test, rep, ["Natural"], groups, 2, rec.C_GRID)
+    assert len(calls) == 1
+    for key in ("encoder_param", "C", "inner_accuracy", "predictions", "accuracy"):
+        assert both["Natural"][key] == alone["Natural"][key], key
+    if both["SC"]["encoder_param"] == rep.natural_param and both["SC"]["C"] == \
+            both["Natural"]["C"]:
+        assert both["SC"]["predictions"] == both["Natural"]["predictions"]
+
+
+def test_cells_run_on_the_callers_joblib_backend_with_the_same_results(separable):
+    """With ``n_jobs=None`` the (learner, outer fold) tasks go to the active joblib
+    configuration (what an executor's ``activate`` sets: local processes here, Ray alike);
+    every cell is the same as in one process."""
+    from joblib import parallel_config
+
+    kw = dict(split="image", n_folds=3, inner_folds=2, random_state=0, **SMALL)
+    cells = [("NKM", "ST"), ("GSVQ", "Natural")]
+    alone = list(rec.nested_cv_cells(separable, cells, n_jobs=1, **kw))
+    with parallel_config(backend="loky", n_jobs=2):
+        pooled = list(rec.nested_cv_cells(separable, cells, n_jobs=None, **kw))
+    by = {(c["learner"], c["encoder"]): c for c in pooled}
+    for cell in alone:
+        other = by[(cell["learner"], cell["encoder"])]
+        for key in ("encoder_param", "C", "inner_accuracy", "predictions", "accuracy"):
+            assert [f[key] for f in cell["folds"]] == [f[key] for f in other["folds"]], key

@@ -176,6 +176,71 @@ def test_warm_started_and_cold_solutions_agree(n, d):
 
 @pytest.mark.parametrize(("n", "d"), SHAPES)
 @pytest.mark.parametrize("form", ["kernel", "primal"])
+def test_a_start_from_a_neighbouring_problem_reaches_the_same_minimum(n, d, form):
+    """``start`` (a neighbouring problem's solution, as the next inner fold gets) changes the
+    path only: the same minimiser as the cold start, up to rounding, for every C after it."""
+    X, y = _planted(n, d, seed=17)
+    keep = np.arange(n) % 5 != 0  # the neighbour: another four fifths of the rows
+    neighbour = squared_hinge_fit(X[keep], y[keep], [1.0], form=form)[0]
+    Cs = [1.0, 100.0]
+    cold = squared_hinge_fit(X, y, Cs, form=form)
+    warm = squared_hinge_fit(X, y, Cs, form=form, start=neighbour[:2])
+    for (wc, bc, _), (ww, bw, _), C in zip(cold, warm, Cs, strict=True):
+        np.testing.assert_allclose(ww, wc, rtol=0, atol=1e-8 * np.abs(wc).max())
+        assert abs(bw - bc) <= 1e-8 * max(1.0, abs(bc))
+        assert _value(ww, bw, X, y, C) <= _value(wc, bc, X, y, C) * (1 + 1e-12)
+    # started at its own solution, one step that changes nothing
+    again = squared_hinge_fit(X, y, [1.0], form=form, start=cold[0][:2])[0]
+    assert again[2] == 1
+    np.testing.assert_allclose(again[0], cold[0][0], rtol=0,
+                               atol=1e-10 * np.abs(cold[0][0]).max())
+    # without warm starts between the C values, only the first C starts there
+    sep = squared_hinge_fit(X, y, Cs, form=form, start=cold[0][:2], warm_start=False)
+    alone = squared_hinge_fit(X, y, [100.0], form=form)[0]
+    assert sep[0][2] == 1 and sep[1][2] == alone[2]
+
+
+def test_a_bad_start_is_a_clear_error():
+    X, y = _planted(60, 5, seed=0)
+    with pytest.raises(ValueError, match="start must be a finite"):
+        squared_hinge_fit(X, y, [1.0], start=(np.zeros(4), 0.0))
+    with pytest.raises(ValueError, match="start must be a finite"):
+        squared_hinge_fit(X, y, [1.0], start=(np.zeros(5), np.nan))
+
+
+def test_primal_gram_is_updated_in_place_as_the_violators_change():
+    """The primal form's ``[X_S 1]^T [X_S 1]`` (lower triangle), after rows enter and leave in
+    several blocks, equals the sum over the current rows; the same scratch and work arrays
+    serve every update and solve."""
+    from dlsr import svm
+
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(300, 7))
+    y = np.where(rng.random(300) < 0.5, 1.0, -1.0)
+    system = svm._PrimalSystem(X, y)
+    old_block = svm._BLOCK_ROWS
+    svm._BLOCK_ROWS = 16  # several blocks per update
+    try:
+        buf = A = None
+        for frac in (1.0, 0.6, 0.65, 0.3, 0.31, 0.9):
+            idx = np.flatnonzero(rng.random(300) < frac)
+            w, b = system.solve(idx, lam=2.0)
+            Z = np.c_[X[idx], np.ones(idx.size)]
+            np.testing.assert_allclose(np.tril(system._H), np.tril(Z.T @ Z), rtol=1e-12,
+                                       atol=1e-10)
+            # the solve is that of the full symmetric system
+            lhs = Z.T @ Z + np.diag(np.r_[np.full(7, 2.0), 0.0])
+            x = np.linalg.solve(lhs, Z.T @ y[idx])
+            np.testing.assert_allclose(np.r_[w, b], x, rtol=1e-9, atol=1e-12)
+            if buf is not None:
+                assert system._buf is buf and system._A is A
+            buf, A = system._buf, system._A
+    finally:
+        svm._BLOCK_ROWS = old_block
+
+
+@pytest.mark.parametrize(("n", "d"), SHAPES)
+@pytest.mark.parametrize("form", ["kernel", "primal"])
 def test_optimality_conditions_hold(n, d, form):
     X, y = _planted(n, d, seed=13)
     for C, (w, b, _) in zip(C_VALUES, squared_hinge_fit(X, y, C_VALUES, form=form),
