@@ -107,6 +107,7 @@ def main(argv=None) -> int:
     ex = Executor(backend="loky" if args.jobs != 1 else "sequential", n_jobs=args.jobs,
                   progress=False)
     grow([table[n] for n in names], dets, make_detector, args.out, executor=ex,
+         report=list(table.values()),
          steps=args.steps)
     return 0
 

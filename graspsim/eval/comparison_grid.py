@@ -159,6 +159,8 @@ def row_results(out, row: Row, detectors: Sequence[str], reference: str = "mask-
     """
     out = Path(out)
     unit = row.unit
+    # a detector not run on this row yet (a column added later) is left out of it
+    detectors = [d for d in detectors if (out / row.name / d / f"{unit}.jsonl").is_file()]
     read = {d: _records(out / row.name / d, unit) for d in detectors}
     recs = {d: r for d, (r, _) in read.items()}
     shared = sorted(set.intersection(*(set(r) for r in recs.values()))) if recs else []
@@ -263,7 +265,7 @@ def results_markdown(results: dict) -> str:
 
 def grow(rows: Sequence[Row], detectors: Sequence[str], make_detector: Callable, out,
          executor=None, steps: int | None = None, seed: int = 0, candidates: int = 32,
-         reference: str = "mask-pca") -> dict:
+         reference: str = "mask-pca", report: Sequence[Row] | None = None) -> dict:
     """Grow every (row, detector) cell step by step, writing the results after each step.
 
     Parameters
@@ -283,6 +285,10 @@ def grow(rows: Sequence[Row], detectors: Sequence[str], make_detector: Callable,
     candidates : int
         Labelled candidates per observation for the oracle.
     reference : str
+    report : sequence of Row or None
+        The rows ``results.json`` and ``results.md`` cover (default: ``rows``): a campaign
+        grown a few rows at a time keeps the others' figures in its results. A row of
+        ``report`` with no folder in ``out`` yet is left out.
 
     Returns
     -------
@@ -290,6 +296,9 @@ def grow(rows: Sequence[Row], detectors: Sequence[str], make_detector: Callable,
         Row name to :func:`row_results`, as written to ``out/results.json``.
     """
     out = Path(out)
+    grown = {r.name for r in rows}
+    shown = [r for r in (rows if report is None else report)
+             if r.name in grown or (out / r.name).is_dir()]
     out.mkdir(parents=True, exist_ok=True)
     n_steps = max(len(r.steps) for r in rows)
     results: dict = {}
@@ -301,7 +310,7 @@ def grow(rows: Sequence[Row], detectors: Sequence[str], make_detector: Callable,
                              candidates=candidates)
                 log.info("%s %s n=%d: %s", row.name, name, n,
                          {k: s.get(k) for k in ("success_rate", "declutter_rate")})
-            results = {r.name: row_results(out, r, detectors, reference) for r in rows}
+            results = {r.name: row_results(out, r, detectors, reference) for r in shown}
             write_json_atomic(out / "results.json", results, indent=1)
             write_text_atomic(out / "results.md", results_markdown(results))
     return results

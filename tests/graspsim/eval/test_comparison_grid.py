@@ -43,6 +43,12 @@ def test_grid_grows_pairs_and_resumes(tmp_path):
     assert saved["drop"]["n"] == 3
     md = (tmp_path / "results.md").read_text()
     assert md == results_markdown(saved) and "## drop (3 paired trials" in md
+    # grown a row at a time, the results still cover every row it has grown, and a column
+    # not run on a row yet is left out of that row
+    part = grow(rows[:1], [*dets, "oracle"], _make, tmp_path, steps=1, report=rows)
+    assert set(part) == {"drop", "pile"} and part["pile"]["n"] == 1
+    assert "oracle" in part["drop"]["cells"] and "oracle" not in part["pile"]["cells"]
+    res = grow(rows, dets, _make, tmp_path)
     # a rerun finds every cell done: nothing is run again
     sizes = {d: (tmp_path / "drop" / d / "trials.jsonl").stat().st_size for d in dets}
     grow(rows, dets, _make, tmp_path)
