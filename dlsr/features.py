@@ -22,7 +22,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from . import coding, dictionaries, patches, whitening
-from ._memory import reused_heap, small_pages
+from .memory import reused_heap, small_pages
 
 __all__ = [
     "LEARNERS",
@@ -562,7 +562,7 @@ def rectangle_features_multi(
         if not list(params):
             raise ValueError(f"params of {enc!r} must hold at least one encoder parameter")
     acc = cpu_seconds if cpu_seconds is not None else {}
-    # see dlsr._memory: freshly faulted pages (huge or not) cost more than they save
+    # see dlsr.memory: freshly faulted pages (huge or not) cost more than they save
     with small_pages(), reused_heap():
         out = None
         for start in range(0, n, chunk_size):

@@ -36,7 +36,6 @@ from joblib import Parallel, delayed
 from sklearn.model_selection import GroupKFold
 from sklearn.pipeline import Pipeline
 
-from ._memory import reused_heap
 from .features import (
     ENCODER_GRIDS,
     ENCODERS,
@@ -47,6 +46,7 @@ from .features import (
     fit_representation,
     rectangle_features_multi,
 )
+from .memory import reused_heap
 from .records import atomic_write, file_errors, load_npz, read_jsonl, write_text_atomic
 from .svm import FeatureStandardizer, SquaredHingeSVC, squared_hinge_fit
 
@@ -59,6 +59,8 @@ __all__ = [
     "recognition_data",
     "make_recognition_model",
     "outer_folds",
+    "inner_choice",
+    "outer_test",
     "nested_cv_cell",
     "nested_cv_cells",
     "run_recognition_benchmark",
@@ -315,7 +317,7 @@ def _fold_task(key, data, train, test, rep, rep_args, encoders, groups, inner_fo
     seconds, stages, results)``: ``fitted`` is the representation fitted here (None when it
     was given), the seconds are its cost and ``stages`` their split (empty when given)."""
     fitted, cpu, wall, stages = None, 0.0, 0.0, {}
-    with reused_heap():  # the dictionaries, features and classifiers: see dlsr._memory
+    with reused_heap():  # the dictionaries, features and classifiers: see dlsr.memory
         if rep is None:
             rep, cpu, wall, stages = _fold_representation(data, train, key[0], *rep_args)
             fitted = rep
@@ -392,12 +394,12 @@ def _inner_scores(Ftr, y_tr, inner, C_grid):
     return accs, last
 
 
-def _choose(feats_tr, y_tr, inner, C_grid, memo=None):
+def inner_choice(feats_tr, y_tr, inner, C_grid, memo=None):
     """Inner CV over (encoder param, C) on the outer training fold: ``(score, param, C)``.
 
     ``feats_tr`` maps each encoder parameter to its training features. Per parameter and
     inner fold, the C values are fitted together (one standardiser, one kernel), each inner
-    fold starting from its neighbour's solution (:func:`_inner_scores`); candidates are
+    fold starting from its neighbour's solution; candidates are
     compared in order (parameters, then C), a later one winning only if better by > 1e-12.
 
     ``memo`` (a dict, for one ``y_tr``, ``inner`` and ``C_grid``) keeps each feature array's
@@ -420,9 +422,9 @@ def _choose(feats_tr, y_tr, inner, C_grid, memo=None):
     return best
 
 
-def _test(Ftr, Fte, y_tr, y_te, choice, start=None):
+def outer_test(Ftr, Fte, y_tr, y_te, choice, start=None):
     """The outer fit on the whole training fold with the chosen ``(score, param, C)`` and its
-    test accuracy; ``start`` as in :func:`_fit_svms`."""
+    test accuracy; ``start``, a solution to start the solver from (None: zero)."""
     score, param, C = choice
     (pred,) = _fit_svms(Ftr, y_tr, [C], start=start)[0](Fte)
     return {
@@ -466,7 +468,7 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
     for enc in encoders:
         t1, c1 = time.perf_counter(), time.process_time()
         feats_tr[enc] = dict(zip(grids[enc], Ftr[enc], strict=True))
-        choices[enc] = _choose(feats_tr[enc], y_tr, inner, tuple(C_grid), memo)
+        choices[enc] = inner_choice(feats_tr[enc], y_tr, inner, tuple(C_grid), memo)
         own[enc][0] += time.perf_counter() - t1
         own[enc][1] += time.process_time() - c1
     t0, c0 = time.perf_counter(), time.process_time()
@@ -496,7 +498,7 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
             last = memo[id(F_enc)][2]  # None when no inner fold had both classes
             start = None if last is None else last[list(C_grid).index(C)]
             refits[key] = (F_enc, Fte[enc][0],
-                           _test(F_enc, Fte[enc][0], y_tr, y_te, choices[enc], start=start))
+                           outer_test(F_enc, Fte[enc][0], y_tr, y_te, choices[enc], start=start))
         res = {**refits[key][2], "encoder_param": choices[enc][1],
                "inner_accuracy": choices[enc][0]}
         wall_share = feature_wall * share[enc] / max(feature_cpu, 1e-12)

@@ -1,5 +1,5 @@
 """GG-CNN's training and inference speed on this machine, with glibc's default allocation
-against :func:`dlsr._memory.reused_heap` (one JSON object on stdout).
+against :func:`dlsr.memory.reused_heap` (one JSON object on stdout).
 
 A training sample-step (300 x 300 input, batch 8, the paper's network, augmentation and label
 maps included) allocates and frees about 100 MB of activations per batch in blocks above
@@ -47,7 +47,7 @@ def _usage():
 def _measure(torch, reused, n_batches, n_forwards):
     import contextlib
 
-    from dlsr._memory import reused_heap
+    from dlsr.memory import reused_heap
     from graspsim.detectors.ggcnn.model import FILTERS, build_network
 
     torch.manual_seed(0)

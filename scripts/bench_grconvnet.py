@@ -48,7 +48,7 @@ def _cpu():
 
 
 def _measure(torch, network, arch, size, n_batches, n_forwards):
-    from dlsr._memory import reused_heap
+    from dlsr.memory import reused_heap
     from graspsim.detectors.ggcnn.model import n_parameters, network_of
 
     spec = network_of(network)

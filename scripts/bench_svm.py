@@ -27,9 +27,10 @@ Ratios are seconds of the peer over seconds of ``newton`` (> 1: Newton is faster
 each C. ``objective_gap`` is (peer objective - Newton objective) / Newton objective.
 
 With ``--features`` and ``--inner`` (default), also the recognition benchmark's inner CV of one
-outer fold (:func:`dlsr.recognition._choose_and_test`: every ``F[i]`` an encoder parameter, 5
-inner group folds over the .npz's ``g`` (or rows) and C in {1, 10}, then the final fit) against
-the former per-(fold, C) L-BFGS loop, with their outputs compared.
+outer fold (:func:`dlsr.recognition.inner_choice` then :func:`~dlsr.recognition.outer_test`:
+every ``F[i]`` an encoder parameter, 5 inner group folds over the .npz's ``g`` (or rows) and
+C in {1, 10}, then the final fit) against the former per-(fold, C) L-BFGS loop, with their
+outputs compared.
 
 Timing is single-threaded BLAS by default (``--threads``).
 
@@ -182,7 +183,7 @@ def _old_choose_and_test(feats, y_tr, y_te, inner, C_grid):
 
 def _inner_cv(z):
     """Inner CV of one outer fold, new and former; ``z`` maps the .npz's keys to arrays."""
-    from dlsr.recognition import _choose_and_test, outer_folds
+    from dlsr.recognition import inner_choice, outer_folds, outer_test
 
     F, y, ntr = z["F"], z["y"], int(z["ntr"])
     groups = z["g"] if "g" in z else np.arange(ntr)
@@ -191,7 +192,8 @@ def _inner_cv(z):
     feats = {i: (F[i][:ntr], F[i][ntr:]) for i in range(len(F))}
     y_tr, y_te = y[:ntr], y[ntr:]
     t, c = time.perf_counter(), time.process_time()
-    new = _choose_and_test(feats, y_tr, y_te, inner, C_GRID)
+    choice = inner_choice({i: tr for i, (tr, _) in feats.items()}, y_tr, inner, C_GRID)
+    new = outer_test(*feats[choice[1]], y_tr, y_te, choice)
     t_new, c_new = time.perf_counter() - t, time.process_time() - c
     t, c = time.perf_counter(), time.process_time()
     old = _old_choose_and_test(feats, y_tr, y_te, inner, C_GRID)

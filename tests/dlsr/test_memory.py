@@ -6,10 +6,10 @@ import threading
 
 import pytest
 
-from dlsr._memory import small_pages
+from dlsr.memory import small_pages
 
 _NO_SWITCH = ("this numpy has no numpy._core.multiarray._set_madvise_hugepage (numpy < 2 keeps "
-              "it elsewhere): dlsr._memory.small_pages is then a no-op, with nothing to check")
+              "it elsewhere): dlsr.memory.small_pages is then a no-op, with nothing to check")
 multiarray = pytest.importorskip("numpy._core.multiarray", reason=_NO_SWITCH)
 if not hasattr(multiarray, "_get_madvise_hugepage"):
     pytest.skip(_NO_SWITCH, allow_module_level=True)
@@ -71,7 +71,7 @@ def _faults_of_second_allocation(nbytes):
 
 
 def test_reused_heap_keeps_freed_blocks_and_restores_on_leaving():
-    from dlsr import _memory
+    from dlsr import memory as _memory
 
     if _memory._libc is None:
         pytest.skip("the C library is not glibc: reused_heap is a no-op there")

@@ -26,9 +26,10 @@ SMALL = {"n_atoms": 12, "n_patches": 3000}
 def _choose_and_test(feats, y_tr, y_te, inner, C_grid):
     """The benchmark's inner choice then outer test, on (training, test) features per
     parameter."""
-    choice = rec._choose({param: tr for param, (tr, _) in feats.items()}, y_tr, inner, C_grid)
+    choice = rec.inner_choice({param: tr for param, (tr, _) in feats.items()}, y_tr, inner,
+                              C_grid)
     Ftr, Fte = feats[choice[1]]
-    return rec._test(Ftr, Fte, y_tr, y_te, choice)
+    return rec.outer_test(Ftr, Fte, y_tr, y_te, choice)
 
 
 def _bar_images(n, vertical, rng):

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
-from dlsr._memory import reused_heap
+from dlsr.memory import reused_heap
 from dlsr.records import read_json, write_text_atomic
 from dlsr.rectangles import normalize_angle, rects_to_array
 from graspsim.data.samples import load_samples
@@ -328,7 +328,7 @@ def train_network(samples, out, network: str, arch: dict, steps: int = 20_000, s
     torch.set_num_threads(int(threads))
     # every batch allocates and frees ~100 MB of activations in blocks above glibc's mmap
     # threshold: kept on the heap, a sample-step costs 110-120 ms instead of 245 ms on 2 cores
-    # (42 % of the CPU time was page faults; scripts/bench_ggcnn.py, dlsr._memory)
+    # (42 % of the CPU time was page faults; scripts/bench_ggcnn.py, dlsr.memory)
     try:
         with reused_heap():
             with torch.random.fork_rng(devices=[] if device == "cpu" else None):
