@@ -47,8 +47,8 @@ from .trials import TrialConfig, run_trials
 
 log = logging.getLogger(__name__)
 
-__all__ = ["data_efficiency", "train_dlsr_models", "equal_time_model", "catch_up",
-           "curve_markdown", "curve_figure"]
+__all__ = ["data_efficiency", "train_dlsr_models", "train_timed", "equal_time_model",
+           "catch_up", "curve_markdown", "curve_figure"]
 
 #: GG-CNN's rows at every size: the budget chosen on validation scenes, and the model trained
 #: for as long as DLSR's default took to train (equal training wall time), raw and
@@ -81,18 +81,30 @@ def train_dlsr_models(samples, folder, n: int, seed: int, n_atoms: int = 200,
     models = {}
     for name, physical, kind in (("dlsr", True, "lattice"), ("dlsr-paper", False, "dense")):
         mpath = Path(folder) / f"{name}_{n}"
-        timing = mpath.with_name(mpath.name + ".seconds.json")
-        if not timing.exists():
-            t0 = time.perf_counter()
-            m = train_detector(samples, n_atoms=n_atoms, n_patches=n_patches,
-                               random_state=seed, detector=kind, physical=physical,
-                               grid_negatives=0.0)
-            m.save(mpath)
-            write_text_atomic(timing, json.dumps({"seconds": time.perf_counter() - t0}))
+        seconds = train_timed(samples, mpath, seed, n_atoms=n_atoms, n_patches=n_patches,
+                              detector=kind, physical=physical, grid_negatives=0.0)
         det = DLSRDetector.load(mpath).detector(kind)
-        models[name] = (gripper_aware(det, hand=hand) if name == "dlsr" else det,
-                        read_json(timing, "timing")["seconds"])
+        models[name] = (gripper_aware(det, hand=hand) if name == "dlsr" else det, seconds)
     return models
+
+
+def train_timed(samples, path, seed: int, **options) -> float:
+    """DLSR trained on ``samples`` (:func:`dlsr.detection.train_detector` with ``options``)
+    and saved as ``path``, with its training wall time in ``<path>.seconds.json``; a model
+    already saved there is not trained again.
+
+    Returns
+    -------
+    float
+        The training wall time (seconds), as recorded.
+    """
+    path = Path(path)
+    timing = path.with_name(path.name + ".seconds.json")
+    if not timing.exists():
+        t0 = time.perf_counter()
+        train_detector(samples, random_state=seed, **options).save(path)
+        write_text_atomic(timing, json.dumps({"seconds": time.perf_counter() - t0}))
+    return read_json(timing, "timing")["seconds"]
 
 
 def equal_time_model(gpath, seconds: float, samples, seed: int, device: str = "cpu",

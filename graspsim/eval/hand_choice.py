@@ -28,13 +28,11 @@ folders, resumable), ``choice.json`` and ``choice.md`` (rewritten after every ha
 
 from __future__ import annotations
 
-import json
 import logging
-import time
 from pathlib import Path
 
 from dlsr.datasets import load_cornell
-from dlsr.detection import DLSRDetector, train_detector
+from dlsr.detection import DLSRDetector
 from dlsr.records import read_json, write_json_atomic, write_text_atomic
 
 from ..data.datagen import make_dataset
@@ -42,6 +40,7 @@ from ..detectors.gripper_aware import gripper_aware
 from ..runtime.executor import Executor, task_seeds
 from ..sim.execution import ExecutionParams
 from .compare import compare_outcomes
+from .data_efficiency import train_timed
 from .stats import wilson_interval
 from .trials import TrialConfig, run_trials
 
@@ -64,16 +63,6 @@ def hand_candidates(hand: str) -> list[str]:
     the built-in hand)."""
     names = [c.format(hand=hand) for c in CANDIDATE_ORDER]
     return list(dict.fromkeys(names))
-
-
-def _train_model(samples, path: Path, seed: int, dlsr: dict) -> Path:
-    timing = path.with_name(path.name + ".seconds.json")
-    if not timing.exists():
-        t0 = time.perf_counter()
-        model = train_detector(samples, random_state=seed, **dlsr)
-        model.save(path)
-        write_text_atomic(timing, json.dumps({"seconds": time.perf_counter() - t0}))
-    return path
 
 
 def _model_path(out: Path, cfg: dict, name: str) -> Path:
@@ -146,8 +135,8 @@ def choose_per_hand(out, hands, curve_model, objects: str = "ycb:train", n_train
                          n_candidates=candidates, sampler="dense", executor=ex,
                          progress=progress, params=ExecutionParams.with_hand(label_hand))
             samples = sorted(load_cornell(data), key=lambda s: s.image_id)
-            models[name] = _train_model(samples, _model_path(out, cfg, name), s_model,
-                                         dlsr)
+            models[name] = _model_path(out, cfg, name)
+            train_timed(samples, models[name], s_model, **dlsr)
         return models[name]
 
     for hand in hands:
