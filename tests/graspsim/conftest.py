@@ -120,3 +120,23 @@ def still_running():
                 return alive
             time.sleep(0.1)
     return check
+
+
+@pytest.fixture(scope="session")
+def observed_test_scenes():
+    """``observed_test_scenes(seed, n)``: the observations of trials ``0 .. n-1`` of ``seed``
+    on the built-in test objects (a detector's input), each with detector seed 0."""
+    return _observed_test_scenes
+
+
+def _observed_test_scenes(seed: int, n: int) -> list[dict]:
+    from graspsim.labels.graspability import resolve_objects
+    from graspsim.sim.bullet import Simulation
+    from graspsim.sim.observe import observation, observe_scene
+
+    sim = Simulation()
+    try:
+        specs = resolve_objects("test")
+        return [observation(observe_scene(sim, specs, seed, i)[2], 0) for i in range(n)]
+    finally:
+        sim.close()

@@ -12,21 +12,8 @@ from dlsr.rectangles import array_to_rects
 
 
 @pytest.fixture(scope="module")
-def scenes():
-    from graspsim.labels.graspability import resolve_objects
-    from graspsim.sim.bullet import Simulation
-    from graspsim.sim.observe import observation, observe_scene
-
-    sim = Simulation()
-    try:
-        specs = resolve_objects("test")
-        out = []
-        for i in range(4):
-            _, _, frame, _ = observe_scene(sim, specs, 0, i)
-            out.append(observation(frame, 0))
-    finally:
-        sim.close()
-    return out
+def scenes(observed_test_scenes):
+    return observed_test_scenes(0, 4)
 
 
 @pytest.fixture(scope="module")

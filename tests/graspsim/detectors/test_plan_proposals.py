@@ -20,21 +20,8 @@ MODEL = Path(__file__).resolve().parents[3] / "results/ggcnn-curve/models/dlsr_3
 
 
 @pytest.fixture(scope="module")
-def scenes():
-    from graspsim.labels.graspability import resolve_objects
-    from graspsim.sim.bullet import Simulation
-    from graspsim.sim.observe import observation, observe_scene
-
-    sim = Simulation()
-    try:
-        specs = resolve_objects("test")
-        out = []
-        for i in range(6):
-            _, _, frame, _ = observe_scene(sim, specs, 3, i)
-            out.append(observation(frame, 0))
-    finally:
-        sim.close()
-    return out
+def scenes(observed_test_scenes):
+    return observed_test_scenes(3, 6)
 
 
 @pytest.fixture(scope="module")
