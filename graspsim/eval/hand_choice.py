@@ -39,6 +39,7 @@ from ..data.datagen import make_dataset
 from ..detectors.gripper_aware import gripper_aware
 from ..runtime.executor import Executor, task_seeds
 from ..sim.execution import ExecutionParams
+from ..sim.hands import HAND_NAMES
 from .compare import compare_outcomes
 from .data_efficiency import train_timed
 from .stats import wilson_interval
@@ -117,7 +118,9 @@ def choose_per_hand(out, hands, curve_model, objects: str = "ycb:train", n_train
     dlsr = {**_DLSR, "n_atoms": int(n_atoms), "n_patches": int(n_patches)}
     s_data, s_val, s_model = task_seeds(seed, 3)
     ex = executor or Executor("sequential", progress=progress)
-    cfg = {"objects": train, "hands": list(hands), "n_train": int(n_train),
+    # The hands are a selection, not a setting: each hand's choice is independent, so a later
+    # run may add hands to the folder.
+    cfg = {"objects": train, "n_train": int(n_train),
            "n_val": int(n_val), "candidates": int(candidates), "seed": int(seed),
            "curve_model": str(curve_model), "dlsr": dlsr}
     path = out / "choice.json"
@@ -201,7 +204,7 @@ def choice_markdown(result: dict) -> str:
              "Ties go to the earlier candidate.", "",
              "| hand | candidate | validation success | 95 % (Wilson) | vs mask-pca (p) | "
              "chosen |", "|---|---|---|---|---|---|"]
-    for hand in cfg.get("hands", []):
+    for hand in HAND_NAMES:
         e = result.get(hand)
         if not e:
             continue

@@ -68,5 +68,9 @@ def test_choice_per_hand_resumes_and_loads(tmp_path, curve_model):
     assert det.hand == "franka"
     with pytest.raises(ValueError, match="no choice for the hand 'wsg50'"):
         chosen_detector(out, "wsg50")
+    # the hands are a selection: one hand alone reruns nothing and keeps the other's choice
+    again = choose_per_hand(out, ["builtin"], curve_model, objects="train", **SMALL)
+    assert again["builtin"] == res["builtin"] and again["franka"] == res["franka"]
     with pytest.raises(ValueError, match="other settings"):
-        choose_per_hand(out, ["builtin"], curve_model, objects="train", **SMALL)
+        choose_per_hand(out, ["builtin"], curve_model, objects="train",
+                        **{**SMALL, "n_val": SMALL["n_val"] + 1})
