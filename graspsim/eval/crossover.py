@@ -13,7 +13,10 @@ training size ``n`` (nested subsets, smallest first):
   is used (ties to the smaller). GR-ConvNet is the published ``k = 32`` network unless its
   plateau is not reached within ``max_hours`` of training at that size; it is then trained as
   the authors' ``k = 16`` variant and named so (``grconvnet16``), and the ``k = 32`` budget
-  curve stays in the record beside it;
+  curve stays in the record beside it (the two compared at that size); at the larger sizes,
+  whose plateaus need no fewer steps, ``k = 16`` is trained directly. Once a plateau is found,
+  the budgets' weights other than the chosen one's and the training checkpoint are deleted
+  (:func:`graspsim.detectors.ggcnn.plateau.prune_snapshots`; their records stay);
 * runs every detector on the same ``test_trials`` scenes of the test objects (one seed),
   labelled once (``test_candidates`` physics labels per scene, shared by every detector through
   :class:`graspsim.labels.store.SceneLabels`), so that each trial has both its physical outcome
@@ -43,7 +46,7 @@ from dlsr.records import read_json, write_text_atomic
 from ..data.datagen import make_dataset
 from ..detectors.ggcnn.detector import GGCNNDetector, GRConvNetDetector
 from ..detectors.ggcnn.model import model_paths, network_of
-from ..detectors.ggcnn.plateau import train_to_plateau
+from ..detectors.ggcnn.plateau import prune_snapshots, train_to_plateau
 from ..detectors.ggcnn.train import trainer
 from ..detectors.gripper_aware import gripper_aware
 from ..detectors.loading import load_detector
@@ -131,6 +134,14 @@ def crossover(result: dict, dlsr: str = "dlsr", alpha: float = 0.05) -> dict:
                         f"{sizes[-1]} training scenes")
         out[peer] = {"size": first, "sizes": sizes, "sentence": sentence}
     return out
+
+
+def _k32_capped_at(result: dict, n: int) -> int | None:
+    """The smallest training size below ``n`` at which GR-ConvNet ``k = 32`` passed the time
+    cap (None: none)."""
+    capped = [int(k) for k, p in result.get("plateau", {}).items()
+              if int(k) < n and p.get("grconvnet", {}).get("stopped") == "capped"]
+    return min(capped) if capped else None
 
 
 def _peer_trainer(network: str, samples, seed: int, device: str, dlsr_seconds: float,
@@ -245,6 +256,15 @@ def crossover_study(out, sizes=(10, 30, 100, 300, 1000, 3000), peers=PEERS,
             variants = [(p, {})]
             if p == "grconvnet":
                 variants = [("grconvnet", {"channels": 32}), ("grconvnet16", {"channels": 16})]
+                capped_at = _k32_capped_at(result, n)
+                if capped_at is not None:
+                    # a larger training set needs no fewer steps: k = 32 would pass the cap
+                    # again, so the k = 16 variant is trained directly
+                    log.info("grconvnet at %d scenes: k = 32 passed %.1f h at %d scenes; "
+                             "k = 16", n, max_hours, capped_at)
+                    plateaus["grconvnet"] = {"skipped": f"k = 32 capped at {capped_at} "
+                                                        "scenes"}
+                    variants = variants[1:]
             for label, arch in variants:
                 mpath = out / "models" / f"{label}_{n}"
 
@@ -264,6 +284,7 @@ def crossover_study(out, sizes=(10, 30, 100, 300, 1000, 3000), peers=PEERS,
                     validate, mpath, start=start, recipe=recipes[p], patience=2,
                     max_seconds=3600 * max_hours if capped else None)
                 plateaus[label] = rec
+                prune_snapshots(mpath)  # the chosen budget's weights stay, for the record
                 if rec["stopped"] == "capped":
                     log.info("%s at %d scenes: no plateau in %.1f h at k = 32; k = 16", label,
                              n, max_hours)
@@ -352,7 +373,8 @@ def crossover_markdown(result: dict) -> str:
             curve = "; ".join(f"{b['budget']:,}: {b['successes']}/{b['n']}, {b['seconds']:.0f} s"
                               + (f", {b['loss']:.4g}" if b.get("loss") is not None else "")
                               for b in rec.get("budgets", []))
-            lines.append(f"| {key} | {net} | {curve} | {rec.get('stopped', '')} | "
+            stopped = rec.get("stopped", rec.get("skipped", ""))
+            lines.append(f"| {key} | {net} | {curve} | {stopped} | "
                          f"{rec.get('chosen', '')} |")
     lines += [""] + [f"- {c['sentence']}." for c in result.get("crossover", {}).values()]
     return "\n".join(lines) + "\n"

@@ -31,7 +31,8 @@ from .model import model_paths
 
 log = logging.getLogger(__name__)
 
-__all__ = ["budgets_to", "plateau_reached", "train_to_plateau", "plateau_model"]
+__all__ = ["budgets_to", "plateau_reached", "train_to_plateau", "plateau_model",
+           "prune_snapshots"]
 
 
 def budgets_to(start: int, recipe: int) -> list[int]:
@@ -166,3 +167,31 @@ def plateau_model(out) -> Path:
     if "chosen" not in record:
         raise FileNotFoundError(f"{rec_path}: the training has not finished")
     return _snapshot(out, int(record["chosen"]))
+
+
+def prune_snapshots(out) -> list[Path]:
+    """Delete what a finished plateau search no longer needs: the weights of the budgets not
+    chosen (their ``.json`` records, with the loss and wall time, stay) and the training
+    checkpoint (``MODEL.ckpt.pt`` and ``.ckpt.json``). ``MODEL`` (the last budget) and the
+    chosen ``MODEL_stepN`` stay, so a rerun of :func:`train_to_plateau` finds everything done.
+
+    Returns
+    -------
+    list of Path
+        The files deleted.
+
+    Raises
+    ------
+    FileNotFoundError
+        When ``out`` has no finished plateau record (nothing is deleted).
+    """
+    out = Path(out)
+    chosen = model_paths(plateau_model(out))[0]
+    gone = [p for p in out.parent.glob(f"{out.name}_step*.pt") if p != chosen]
+    gone += [p for p in (out.with_name(out.name + ".ckpt.pt"),
+                         out.with_name(out.name + ".ckpt.json")) if p.is_file()]
+    for p in gone:
+        p.unlink()
+    if gone:
+        log.info("%s: removed %d files the plateau no longer needs", out.name, len(gone))
+    return sorted(gone)

@@ -82,5 +82,17 @@ def test_study_trains_to_plateaus_labels_test_scenes_once_and_resumes(tmp_path):
     again = crossover_study(out, **kw)
     assert again["rows"] == res["rows"]
     assert not [p for p, t in kept.items() if p.stat().st_mtime_ns != t]
+    # only the chosen budgets' weights are kept
+    for label in ("ggcnn", "grconvnet", "grconvnet16"):
+        chosen = res["plateau"]["2"][label]["chosen"]
+        assert sorted(p.name for p in (out / "models").glob(f"{label}_2_step*.pt")) == [
+            f"{label}_2_step{chosen}.pt"]
+        assert not (out / "models" / f"{label}_2.ckpt.pt").exists()
+    # k = 32 passed the cap at 2 scenes: at 3 scenes k = 16 is trained directly
+    more = crossover_study(out, **{**kw, "max_size": 3})
+    assert more["plateau"]["3"]["grconvnet"] == {"skipped": "k = 32 capped at 2 scenes"}
+    assert "grconvnet16" in more["plateau"]["3"] and "grconvnet16+aware" in more["rows"]["3"]
+    assert not list((out / "models").glob("grconvnet_3*"))
+    assert "k = 32 capped at 2 scenes" in (out / "crossover.md").read_text()
     with pytest.raises(ValueError, match="other settings"):
         crossover_study(out, **{**kw, "val_trials": 3})

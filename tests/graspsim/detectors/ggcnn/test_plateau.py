@@ -13,6 +13,7 @@ from graspsim.detectors.ggcnn.plateau import (
     budgets_to,
     plateau_model,
     plateau_reached,
+    prune_snapshots,
     train_to_plateau,
 )
 
@@ -91,6 +92,14 @@ def test_training_stops_at_the_plateau_and_resumes(tmp_path):
     # a rerun trains and validates nothing again
     again = train_to_plateau(train, validate, out, start=8, recipe=256)
     assert again == res and trained == [8, 16, 32, 64] and validated == [8, 16, 32, 64]
+    # pruned: the unchosen budgets' weights and the checkpoint go, their records stay
+    gone = prune_snapshots(out)
+    assert {p.name for p in gone} == {"model_step8.pt", "model_step32.pt", "model_step64.pt",
+                                      "model.ckpt.pt", "model.ckpt.json"}
+    assert (tmp_path / "model_step16.pt").is_file() and (tmp_path / "model.pt").is_file()
+    assert all((tmp_path / f"model_step{b}.json").is_file() for b in (8, 16, 32, 64))
+    assert train_to_plateau(train, validate, out, start=8, recipe=256) == res
+    assert trained == [8, 16, 32, 64] and prune_snapshots(out) == []
 
 
 def test_training_time_caps_the_doubling(tmp_path):
@@ -104,3 +113,5 @@ def test_training_time_caps_the_doubling(tmp_path):
     assert res["stopped"] == "capped" and [b["budget"] for b in res["budgets"]] == [8]
     with pytest.raises(FileNotFoundError, match="train to the plateau first"):
         plateau_model(tmp_path / "other")
+    with pytest.raises(FileNotFoundError, match="train to the plateau first"):
+        prune_snapshots(tmp_path / "other")
