@@ -329,9 +329,11 @@ def fill_depth_holes(z, valid, method: str = "band", band: int = 1, *,
                     holes[hp[ok, 0], hp[ok, 1]] = False
             except QhullError:  # collinear support (e.g. a single valid row): nearest only
                 pass
-    if holes.any():
-        idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
-        out[holes] = z[idx[0][holes], idx[1][holes]]
+    if holes.any():  # the nearest valid pixel, as scipy's distance_transform_edt finds it
+        iy = np.empty(z.shape, np.int64)
+        ix = np.empty(z.shape, np.int64)
+        _crops.nearest_sites(valid, iy, ix)
+        out[holes] = z[iy[holes], ix[holes]]
     return out
 
 

@@ -1,5 +1,6 @@
 """The compiled crop kernels (dlsr._crops) against the numpy code they replaced, bit for bit;
-the compiled hole location against scipy's up to float rounding."""
+the compiled hole location against scipy's up to float rounding; the nearest valid pixel
+against scipy's distance transform, ties included."""
 
 import numpy as np
 import pytest
@@ -166,6 +167,45 @@ def test_hole_band_is_the_dilated_holes():
         ref = ok & ndimage.binary_dilation(~ok, structure=np.ones((3, 3), bool),
                                            iterations=band)
         np.testing.assert_array_equal(_crops.hole_band(ok, band), ref)
+
+
+def _site_masks(seed, n):
+    rng = np.random.default_rng(seed)
+    for t in range(n):
+        m, k = int(rng.integers(1, 40)), int(rng.integers(1, 90))
+        site = rng.random((m, k)) < rng.choice([0.02, 0.1, 0.5, 0.9, 0.99])
+        if t % 3 == 0:  # rectangular holes: equidistant sites everywhere
+            site = np.ones((m, k), bool)
+            for _ in range(int(rng.integers(1, 5))):
+                a, b = rng.integers(0, m), rng.integers(0, k)
+                site[a:a + rng.integers(1, 12), b:b + rng.integers(1, 12)] = False
+        if site.any():
+            yield site
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_nearest_sites_are_scipys_distance_transform_ties_included(seed):
+    n_cases = 0
+    for site in _site_masks(seed, 600):
+        _, (ry, rx) = ndimage.distance_transform_edt(~site, return_indices=True)
+        iy = np.empty(site.shape, np.int64)
+        ix = np.empty(site.shape, np.int64)
+        _crops.nearest_sites(site, iy, ix)
+        np.testing.assert_array_equal(iy, ry)
+        np.testing.assert_array_equal(ix, rx)
+        n_cases += 1
+    assert n_cases > 500
+
+
+def test_fill_depth_holes_nearest_part_is_scipys():
+    """The holes outside the triangulation (and every hole with ``"nearest"``) take the value
+    of the pixel scipy's distance transform names."""
+    rng = np.random.default_rng(8)
+    for site in _site_masks(3, 200):
+        z = rng.normal(size=site.shape)
+        _, (ry, rx) = ndimage.distance_transform_edt(~site, return_indices=True)
+        ref = np.where(site, z, z[ry, rx])
+        np.testing.assert_array_equal(fill_depth_holes(z, site, "nearest"), ref)
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 5), (2, 2), (2, 7), (3, 3), (6, 1), (14, 57)])
