@@ -229,7 +229,7 @@ def _nearest_fill(depth, holes, source):
     # the nearest source pixel, as scipy's distance_transform_edt(~source) finds it
     iy = np.empty(holes.shape, np.int64)
     ix = np.empty(holes.shape, np.int64)
-    _crops.nearest_sites(np.ascontiguousarray(source, dtype=bool), iy, ix)
+    _crops.nearest_sites(np.ascontiguousarray(source, dtype=bool), holes.any(axis=1), iy, ix)
     out = depth.copy()
     out[holes] = depth[iy[holes], ix[holes]]
     return out

@@ -181,7 +181,8 @@ def _count_inliers(x, y, z, loose, coefs, ok, counts, unsure):
     + c2, 1e-9) - z| < loose``, and ``unsure[h]``, those whose verdict lies within a bound of
     the rounding of any order of that sum (8 units in the last place of its terms' absolute
     sum, carried through the reciprocal, plus the reciprocal's and difference's own rounding):
-    only there can another evaluation of the expression decide otherwise."""
+    only there can another evaluation of the expression decide otherwise. Branch-free, so
+    that the loop is vectorised."""
     eps = 2.0 ** -52
     for h in range(coefs.shape[0]):
         if not ok[h]:
@@ -195,18 +196,14 @@ def _count_inliers(x, y, z, loose, coefs, ok, counts, unsure):
             a = x[i] * c0
             b = y[i] * c1
             v = a + b + c2
-            q = 1.0 / max(v, 1e-9)
-            r = abs(q - z[i])
-            if r < loose[i]:
-                n += 1
+            r = abs(1.0 / max(v, 1e-9) - z[i])
+            n += r < loose[i]
+            # another evaluation gives v' within dv of v: 1 / max(v', 1e-9) moves by at most
+            # dv / lo^2 with lo = max(v - dv, 1e-9)
             dv = 8.0 * eps * (abs(a) + abs(b) + abs(c2)) + 1e-300
-            if v >= 2.0 * dv and v >= 2e-9:  # v - dv >= v / 2: 1 / (v - dv)^2 <= 4 q^2
-                err = 4.0 * dv * q * q + 4.0 * eps * (2.0 * q + abs(z[i]) + r) + 1e-15
-            else:
-                lo = max(v - dv, 1e-9)
-                err = dv / (lo * lo) + 4.0 * eps * (1.0 / lo + abs(z[i]) + r) + 1e-15
-            if abs(r - loose[i]) <= err:
-                m += 1
+            ql = 1.0 / max(v - dv, 1e-9)
+            err = dv * ql * ql * 1.0000001 + 4.0 * eps * (ql + abs(z[i]) + r) + 1e-15
+            m += abs(r - loose[i]) <= err
         counts[h] = n
         unsure[h] = m
 
