@@ -18,7 +18,12 @@ against the numpy expressions kept in ``tests/dlsr/test_crop_kernels.py``):
   triangulation of integer pixel positions, each hole located by exact integer orientation
   tests and weighted by Cramer's rule: the values of scipy's ``find_simplex`` and barycentric
   transforms (a 2 x 2 LU factorisation per triangle) up to float rounding, without computing
-  a transform for every triangle.
+  a transform for every triangle;
+* :func:`nearest_sites`: each pixel's nearest valid pixel, as scipy's exact Euclidean
+  distance transform chooses it (the same algorithm and tie-breaking), for the holes left
+  outside the triangulation and the object region's filled depth;
+* :func:`pad_masked`: the resized crop thresholded into its masks, masked and centred in the
+  padded image.
 
 Compiled with numba (``nogil``, cached on disk): the detectors make crops in threads.
 """
@@ -29,7 +34,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["pairwise_sum", "bilinear_grid", "sample_crop", "normals", "hole_band",
-           "interpolate_in_triangles"]
+           "interpolate_in_triangles", "nearest_sites", "pad_masked"]
 
 
 @njit(nogil=True, cache=True)
@@ -376,3 +381,135 @@ def interpolate_in_triangles(pts, values, simplices, holes, out):
                 w2 = 1.0 - (b0 + b1)
                 out[qy, qx] = values[i0] * b0 + values[i1] * b1 + values[i2] * w2
                 holes[qy, qx] = False
+
+
+@njit(nogil=True, cache=True)
+def _envelope_row(fr, fc, n, row, g, out_r, out_c):
+    """One row of the exact Euclidean feature transform (Maurer, Qi and Raghavan 2003): of the
+    sites ``(fr[j], fc[j])`` its columns found (``fr[j] < 0``: none), those whose Voronoi
+    cells cross the row are kept in order, then each pixel takes the nearest, the earlier on a
+    tie."""
+    top = -1
+    for j in range(n):
+        if fr[j] < 0:
+            continue
+        fd = float(fc[j])
+        tw = float(fr[j]) - row
+        w2 = tw * tw
+        while top >= 1:
+            k1 = g[top]
+            k2 = g[top - 1]
+            f1 = float(fc[k1])
+            a = f1 - float(fc[k2])
+            b = fd - f1
+            c = a + b
+            tu = float(fr[k2]) - row
+            tv = float(fr[k1]) - row
+            if c * (tv * tv) - b * (tu * tu) - a * w2 - a * b * c <= 0.0:
+                break
+            top -= 1
+        top += 1
+        g[top] = j
+    if top < 0:
+        for j in range(n):
+            out_r[j] = -1
+            out_c[j] = -1
+        return
+    k = 0
+    for j in range(n):
+        s = g[k]
+        t0 = float(fr[s]) - row
+        t1 = float(fc[s]) - j
+        d1 = t0 * t0 + t1 * t1
+        while k < top:
+            s2 = g[k + 1]
+            t0 = float(fr[s2]) - row
+            t1 = float(fc[s2]) - j
+            d2 = t0 * t0 + t1 * t1
+            if d1 <= d2:
+                break
+            d1 = d2
+            k += 1
+        out_r[j] = fr[g[k]]
+        out_c[j] = fc[g[k]]
+
+
+@njit(nogil=True, cache=True)
+def nearest_sites(site, need, iy, ix):
+    """The nearest ``site`` pixel of the pixels of the rows ``need`` (exact Euclidean
+    distance), as ``scipy.ndimage.distance_transform_edt(~site, return_indices=True)`` chooses
+    it: the same separable algorithm, down the columns (the nearest site of each column, the
+    upper of two equally near), then along each row among the columns' nearest sites (the
+    earlier of two equally near), so that ties are broken the same way. A row's result needs
+    only that row of the first pass: the rows not needed are skipped.
+
+    Parameters
+    ----------
+    site : ndarray of shape (m, n), bool
+        At least one True.
+    need : ndarray of shape (m,), bool
+        The rows whose pixels are wanted.
+    iy, ix : ndarray of shape (m, n), int64, written in the rows ``need``
+        Row and column of each pixel's nearest site.
+    """
+    m, n = site.shape
+    size = max(m, n)
+    for j in range(n):  # down each column: the nearest site in the column, the upper on a tie
+        up = -1
+        for i in range(m):
+            if site[i, j]:
+                up = i
+            if need[i]:
+                iy[i, j] = up  # the nearest above (or here) for now
+        down = -1
+        for i in range(m - 1, -1, -1):
+            if site[i, j]:
+                down = i
+            if need[i]:
+                above = iy[i, j]
+                if above < 0 or (down >= 0 and down - i < i - above):
+                    iy[i, j] = down
+                ix[i, j] = j
+    fr = np.empty(size, np.int64)
+    fc = np.empty(size, np.int64)
+    g = np.empty(size, np.int64)
+    out_r = np.empty(size, np.int64)
+    out_c = np.empty(size, np.int64)
+    for i in range(m):  # along each row, among the columns' nearest sites
+        if not need[i]:
+            continue
+        for j in range(n):
+            fr[j] = iy[i, j]
+            fc[j] = ix[i, j]
+        _envelope_row(fr, fc, n, float(i), g, out_r, out_c)
+        for j in range(n):
+            iy[i, j] = out_r[j]
+            ix[i, j] = out_c[j]
+
+
+@njit(nogil=True, cache=True)
+def pad_masked(g0, g1, g2, r0, c0, img, msk):
+    """The resized crop into the padded image: masks ``> 0.75``, masked values 0.
+
+    Parameters
+    ----------
+    g0, g1 : ndarray of shape (nh, nw, 4), float32
+        The image channels (K, R, G, B) and the depth channels (D, Nx, Ny, Nz), resized.
+    g2 : ndarray of shape (nh, nw, 4), float32
+        The image mask and the depth mask (channels 0 and 1), resized.
+    r0, c0 : int
+        Where the crop's first row and column go.
+    img : ndarray of shape (size, size, 8), float32, written in the crop's place
+    msk : ndarray of shape (size, size, 8), bool, written in the crop's place
+    """
+    nh, nw = g0.shape[0], g0.shape[1]
+    thr = np.float32(0.75)
+    for i in range(nh):
+        for j in range(nw):
+            im = g2[i, j, 0] > thr
+            dm = g2[i, j, 1] > thr
+            for ch in range(4):
+                msk[r0 + i, c0 + j, ch] = im
+                msk[r0 + i, c0 + j, 4 + ch] = dm
+                img[r0 + i, c0 + j, ch] = g0[i, j, ch] if im else np.float32(0.0)
+                img[r0 + i, c0 + j, 4 + ch] = g1[i, j, ch] if dm else np.float32(0.0)

@@ -11,7 +11,8 @@ A canvas is an ``(H, W, 8)`` float32 image with an ``(H, W, 8)`` validity mask (
 * :func:`gather_patches`: the standardised patches at chosen positions, one row each (masked
   entries 0), ready for one matrix product;
 * :func:`valid_row_spans`: the rows of each patch that hold valid entries (the rectangle
-  images' padding masks whole rows);
+  images' padding masks whole rows), from its gathered mask or (:func:`patch_row_spans`) from
+  the canvas; :func:`gather_patch_rows`: only those rows of the patches and their masks;
 * :func:`triangle_scores`: from ``Y1 = whitened patch + mP`` and ``Y2 = whitened patch . c_k +
   b_k`` (one product of the standardised patches with ``[P | P C^T]``), the k-means triangle
   codes ``max(mean_k z - z_k, 0)``, ``z_k = ||x - c_k||`` (:func:`dlsr.coding.kmeans_triangle`),
@@ -43,6 +44,8 @@ __all__ = [
     "gather_patches",
     "gather_masks",
     "valid_row_spans",
+    "patch_row_spans",
+    "gather_patch_rows",
     "triangle_scores",
     "soft_threshold_inplace",
     "soft_threshold_into",
@@ -174,6 +177,74 @@ def gather_masks(msk, rows, cols, M):
                 o = (dy * PATCH + dx) * 8
                 for ch in range(8):
                     M[t, o + ch] = 1.0 if msk[r + dy, c + dx, ch] else 0.0
+
+
+@njit(nogil=True, cache=True)
+def patch_row_spans(msk, rows, cols, lo, hi):
+    """:func:`valid_row_spans` of the patches at ``(rows[t], cols[t])``, read from the canvas
+    mask without gathering the patches' masks."""
+    for t in range(len(rows)):
+        r = rows[t]
+        c = cols[t]
+        first = -1
+        last = -1
+        for dy in range(PATCH):
+            any_valid = False
+            for dx in range(PATCH):
+                for ch in range(8):
+                    if msk[r + dy, c + dx, ch]:
+                        any_valid = True
+                        break
+                if any_valid:
+                    break
+            if any_valid:
+                if first < 0:
+                    first = dy
+                last = dy
+        if first < 0:
+            lo[t] = 0
+            hi[t] = 0
+        else:
+            lo[t] = first
+            hi[t] = last + 1
+
+
+@njit(nogil=True, cache=True)
+def gather_patch_rows(img, msk, rows, cols, mean, inv, a, b, X, M):
+    """Rows ``[a, b)`` of the standardised patches at ``(rows[t], cols[t])`` and of their
+    masks: ``X[t]`` and ``M[t]`` are entries ``a * 48`` to ``b * 48`` of what
+    :func:`gather_patches` and :func:`gather_masks` write (the same values), for patches whose
+    other rows hold no valid entry.
+
+    Parameters
+    ----------
+    img, msk : ndarray of shape (H, W, 8)
+    rows, cols : ndarray of shape (n,), int
+    mean, inv :
+        From :func:`window_stats`.
+    a, b : int
+        Patch rows, ``0 <= a < b <= 6``.
+    X, M : ndarray of shape (n, (b - a) * 48), float32, written
+    """
+    group = GROUP_OF_CHANNEL
+    mu = np.empty(8, np.float32)
+    iv = np.empty(8, np.float32)
+    for t in range(len(rows)):
+        r = rows[t]
+        c = cols[t]
+        for ch in range(8):
+            mu[ch] = mean[r, c, group[ch]]
+            iv[ch] = inv[r, c, group[ch]]
+        for dy in range(a, b):
+            for dx in range(PATCH):
+                o = ((dy - a) * PATCH + dx) * 8
+                for ch in range(8):
+                    if msk[r + dy, c + dx, ch]:
+                        X[t, o + ch] = (img[r + dy, c + dx, ch] - mu[ch]) * iv[ch]
+                        M[t, o + ch] = 1.0
+                    else:
+                        X[t, o + ch] = 0.0
+                        M[t, o + ch] = 0.0
 
 
 @njit(nogil=True, cache=True)

@@ -329,9 +329,11 @@ def fill_depth_holes(z, valid, method: str = "band", band: int = 1, *,
                     holes[hp[ok, 0], hp[ok, 1]] = False
             except QhullError:  # collinear support (e.g. a single valid row): nearest only
                 pass
-    if holes.any():
-        idx = ndimage.distance_transform_edt(~valid, return_distances=False, return_indices=True)
-        out[holes] = z[idx[0][holes], idx[1][holes]]
+    if holes.any():  # the nearest valid pixel, as scipy's distance_transform_edt finds it
+        iy = np.empty(z.shape, np.int64)
+        ix = np.empty(z.shape, np.int64)
+        _crops.nearest_sites(valid, holes.any(axis=1), iy, ix)
+        out[holes] = z[iy[holes], ix[holes]]
     return out
 
 
@@ -379,6 +381,24 @@ def _resize_into(full, imask, dmask, size, interp):
     scale = size / max(nrows, ncols)
     nh = min(size, max(1, int(round(nrows * scale))))
     nw = min(size, max(1, int(round(ncols * scale))))
+    if interp == cv2.INTER_AREA:
+        # three contiguous 4-channel images (image channels; depth channels; the two masks and
+        # two zeros) resized as they are: OpenCV's area resize treats each channel alone, so
+        # the values are those of the slices below, without its copies of strided slices
+        groups = np.empty((3, nrows, ncols, 4), np.float32)
+        groups[0] = full[..., :4]
+        groups[1] = full[..., 4:]
+        groups[2, ..., 0] = imask
+        groups[2, ..., 1] = dmask
+        groups[2, ..., 2:] = 0.0
+        if (nh, nw) != (nrows, ncols):
+            groups = [cv2.resize(g, (nw, nh), interpolation=interp).reshape(nh, nw, 4)
+                      for g in groups]
+        img = np.zeros((size, size, 8), dtype=np.float32)
+        msk = np.zeros((size, size, 8), dtype=bool)
+        _crops.pad_masked(groups[0], groups[1], groups[2], (size - nh) // 2, (size - nw) // 2,
+                          img, msk)
+        return img, msk
     stack = np.concatenate(
         [full, imask[..., None].astype(np.float32), dmask[..., None].astype(np.float32)], axis=2
     )

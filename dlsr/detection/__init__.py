@@ -97,6 +97,7 @@ Departures and choices (named options)
 Modules
 -------
 * :mod:`dlsr.detection.grid`: :class:`SearchGrid`, the object region, :func:`enumerate_candidates`;
+* :mod:`dlsr.detection.table`: the table fitted to the depth, the object standing on it;
 * :mod:`dlsr.detection.model`: :class:`DLSRDetector` and its files;
 * :mod:`dlsr.detection.training`: negatives, training data, :func:`fit_search_grid`,
   :func:`train_detector`;

@@ -200,12 +200,12 @@ class _PatchScorer:
         return S
 
     def _triangle_masked(self, img, msk, rows, cols, mean, inv, full):
+        if self.whiten and self.by_rows and self.triangle:
+            return self._triangle_by_rows(img, msk, rows, cols, mean, inv)
         X = self._gather(img, msk, rows, cols, mean, inv, full)
         if not self.whiten:
             return self._triangle_whitened(X)
         M = self._masks(msk, rows, cols)
-        if self.by_rows and self.triangle:
-            return self._triangle_by_rows(X, M)
         blank = ~M.any(axis=1)
         if not blank.any():
             return self._triangle_whitened(X, M)
@@ -232,15 +232,17 @@ class _PatchScorer:
         _dense.triangle_scores(X, 0, X @ self.CT, 0, self.zero, self.cc, self.VT, S)
         return S
 
-    def _triangle_by_rows(self, X, M):
+    def _triangle_by_rows(self, img, msk, rows, cols, mean, inv):
         """:meth:`_triangle_whitened` of masked patches, each on its rows with valid entries
-        (``by_rows``); a patch without any has the all-masked patch's scores."""
+        (``by_rows``); a patch without any has the all-masked patch's scores. Only those rows
+        of the patches and their masks are gathered, group by group
+        (:func:`dlsr._dense.gather_patch_rows`)."""
         from .. import _dense
 
-        n = len(X)
+        n = len(rows)
         lo = np.empty(n, np.int64)
         hi = np.empty(n, np.int64)
-        _dense.valid_row_spans(M, lo, hi)
+        _dense.patch_row_spans(msk, rows, cols, lo, hi)
         S = np.empty((n, self.V.shape[1]), np.float32)
         blank = hi == 0
         if blank.any():
@@ -252,10 +254,13 @@ class _PatchScorer:
         for group in np.split(order, cuts):
             a, b = int(lo[group[0]]), int(hi[group[0]])
             PT, mPT, CT, zero = self._row_blocks(a, b)
-            e0, e1 = a * PATCH * 8, b * PATCH * 8
-            W = X[group, e0:e1] @ PT
+            Xg = np.empty((len(group), (b - a) * PATCH * 8), np.float32)
+            Mg = np.empty_like(Xg)
+            _dense.gather_patch_rows(img, msk, rows[group], cols[group], mean, inv, a, b, Xg,
+                                     Mg)
+            W = Xg @ PT
             W -= mPT
-            W *= M[group, e0:e1]
+            W *= Mg
             Sg = np.empty((len(group), self.V.shape[1]), np.float32)
             _dense.triangle_scores(W, 0, W @ CT, 0, zero, self.cc, self.VT, Sg)
             S[group] = Sg

@@ -177,7 +177,7 @@ def lattice_candidates(mask, depth, intrinsics, offset, max_opening: float | Non
 
 def _lattice_array(mask, depth, intrinsics, offset, max_opening, jaw_px=(10.0, 28.0),
                    spacing=None, n_angles=12, margin_px=4.0, depth_band=0.02, reach=0.95,
-                   seen=None, widest_in_reach=False, normalized=True):
+                   seen=None, widest_in_reach=False, normalized=True, with_keys=True):
     """:func:`lattice_candidates` as an ``(n, 5)`` array, and the candidates' keys.
 
     Every lattice point's chords in every direction are followed at once, and the candidates
@@ -186,11 +186,14 @@ def _lattice_array(mask, depth, intrinsics, offset, max_opening, jaw_px=(10.0, 2
     those sharing a key (centre rounded to the pixel, direction, half opening rounded, jaw) is
     kept. ``normalized``: the angle column as :class:`~dlsr.rectangles.GraspRectangle` stores
     it (wrapped once more into ``[-pi/2, pi/2)``), else the lattice's own angles.
+    ``with_keys=False`` with no ``seen``: the same candidates, the keys not made (an empty
+    list).
     """
     jaws, step = lattice_step(jaw_px, spacing)
     if n_angles < 1:
         raise ValueError(f"n_angles must be >= 1, got {n_angles}")
     K = None if max_opening is None else check_camera_matrix(intrinsics, "intrinsics")
+    fresh = seen is None
     seen = set() if seen is None else seen
     full = np.asarray(mask, dtype=bool)
     depth = np.asarray(depth, dtype=float)
@@ -265,16 +268,19 @@ def _lattice_array(mask, depth, intrinsics, offset, max_opening, jaw_px=(10.0, 2
     _, first = np.unique(ikey, axis=0, return_index=True)
     first = np.sort(first)
     out_keys = []
-    chosen = []
-    for i in first.tolist():
-        key = (int(ikey[i, 0]), int(ikey[i, 1]), int(ikey[i, 2]), int(ikey[i, 3]),
-               jaws[int(ikey[i, 4])])
-        if key in seen:
-            continue
-        seen.add(key)
-        out_keys.append(key)
-        chosen.append(i)
-    chosen = np.asarray(chosen, dtype=np.intp)
+    if fresh and not with_keys:  # no key seen before, none asked for: every first one is new
+        chosen = first.astype(np.intp)
+    else:
+        chosen = []
+        for i in first.tolist():
+            key = (int(ikey[i, 0]), int(ikey[i, 1]), int(ikey[i, 2]), int(ikey[i, 3]),
+                   jaws[int(ikey[i, 4])])
+            if key in seen:
+                continue
+            seen.add(key)
+            out_keys.append(key)
+            chosen.append(i)
+        chosen = np.asarray(chosen, dtype=np.intp)
     th = normalize_angle(thetas) if normalized else thetas
     arr = np.column_stack([X[chosen], Y[chosen], th[Kk[chosen]], W_[chosen],
                            jaw[J[chosen]]]).reshape(-1, 5)
@@ -442,7 +448,8 @@ class LatticeDetector:
             dep = _fill_region_holes(dep, valid, laid)
         cand, _ = _lattice_array(laid, dep, obs.get("K"), offset, self.max_width, self.jaw_px,
                                  self.spacing, self.n_angles, self.margin_px, self.depth_band,
-                                 self.reach, widest_in_reach=self.widest_in_reach)
+                                 self.reach, widest_in_reach=self.widest_in_reach,
+                                 with_keys=False)
         if self.budget is not None and len(cand) > self.budget:
             cand = cand[np.sort(rng.choice(len(cand), size=int(self.budget), replace=False))]
         if not len(cand):

@@ -1,5 +1,6 @@
 """The compiled crop kernels (dlsr._crops) against the numpy code they replaced, bit for bit;
-the compiled hole location against scipy's up to float rounding."""
+the compiled hole location against scipy's up to float rounding; the nearest valid pixel
+against scipy's distance transform, ties included."""
 
 import numpy as np
 import pytest
@@ -19,6 +20,38 @@ _ONE = 1.0 - 1e-6
 
 
 # --- the numpy code of dlsr.preprocess before the kernels (the reference) --------------------
+def _ref_resize_into(full, imask, dmask, size, interp):
+    """The resize, padding and masking as one stack of 10 channels, resized in slices of 4."""
+    import cv2
+
+    nrows, ncols = imask.shape
+    scale = size / max(nrows, ncols)
+    nh = min(size, max(1, int(round(nrows * scale))))
+    nw = min(size, max(1, int(round(ncols * scale))))
+    stack = np.concatenate(
+        [full, imask[..., None].astype(np.float32), dmask[..., None].astype(np.float32)], axis=2
+    )
+    if (nh, nw) == (nrows, ncols):
+        small = stack
+    elif interp == cv2.INTER_LINEAR:
+        small = cv2.resize(stack, (nw, nh), interpolation=interp)
+    else:
+        small = np.concatenate(
+            [cv2.resize(stack[..., i:i + 4], (nw, nh), interpolation=interp).reshape(nh, nw, -1)
+             for i in range(0, 10, 4)], axis=2)
+    small = small.reshape(nh, nw, 10)
+    img = np.zeros((size, size, 8), dtype=np.float32)
+    msk = np.zeros((size, size, 8), dtype=bool)
+    r0 = (size - nh) // 2
+    c0 = (size - nw) // 2
+    im = small[..., 8] > 0.75
+    dm = small[..., 9] > 0.75
+    msk[r0:r0 + nh, c0:c0 + nw, :4] = im[..., None]
+    msk[r0:r0 + nh, c0:c0 + nw, 4:] = dm[..., None]
+    img[r0:r0 + nh, c0:c0 + nw] = np.where(msk[r0:r0 + nh, c0:c0 + nw], small[..., :8], 0.0)
+    return img, msk
+
+
 def _ref_normals(z):
     z = np.asarray(z, dtype=np.float64)
 
@@ -119,7 +152,7 @@ def test_rectangle_images_equal_the_numpy_code_bit_for_bit(seed):
 
     for i, rect in enumerate(_check_rects(rects)):
         full, im, dm = _ref_crop(src, rect)
-        img, msk = _resize_into(full, im, dm, 24, cv2.INTER_AREA)
+        img, msk = _ref_resize_into(full, im, dm, 24, cv2.INTER_AREA)
         np.testing.assert_array_equal(images[i], img, err_msg=f"rectangle {i}")
         np.testing.assert_array_equal(masks[i], msk, err_msg=f"rectangle {i}")
 
@@ -166,6 +199,70 @@ def test_hole_band_is_the_dilated_holes():
         ref = ok & ndimage.binary_dilation(~ok, structure=np.ones((3, 3), bool),
                                            iterations=band)
         np.testing.assert_array_equal(_crops.hole_band(ok, band), ref)
+
+
+@pytest.mark.parametrize("interpolation", ["area", "linear", "cubic"])
+def test_resize_into_is_the_stack_resized_in_slices(interpolation):
+    """Every crop shape of the lattice (2 to 44 rows, 2 to 120 columns), bit for bit."""
+    import cv2
+
+    interp = {"area": cv2.INTER_AREA, "linear": cv2.INTER_LINEAR,
+              "cubic": cv2.INTER_CUBIC}[interpolation]
+    rng = np.random.default_rng(6)
+    shapes = [(r, c) for r in range(2, 45, 3) for c in list(range(2, 60, 2)) + [75, 101, 120]]
+    shapes += [(24, 24), (24, 10), (10, 24), (1, 7), (7, 1)]
+    for nrows, ncols in shapes:
+        full = rng.normal(size=(nrows, ncols, 8)).astype(np.float32)
+        im = rng.random((nrows, ncols)) > 0.1
+        dm = rng.random((nrows, ncols)) > 0.3
+        got = _resize_into(full, im, dm, 24, interp)
+        ref = _ref_resize_into(full, im, dm, 24, interp)
+        np.testing.assert_array_equal(got[0], ref[0], err_msg=f"{nrows} x {ncols}")
+        np.testing.assert_array_equal(got[1], ref[1], err_msg=f"{nrows} x {ncols}")
+
+
+def _site_masks(seed, n):
+    rng = np.random.default_rng(seed)
+    for t in range(n):
+        m, k = int(rng.integers(1, 40)), int(rng.integers(1, 90))
+        site = rng.random((m, k)) < rng.choice([0.02, 0.1, 0.5, 0.9, 0.99])
+        if t % 3 == 0:  # rectangular holes: equidistant sites everywhere
+            site = np.ones((m, k), bool)
+            for _ in range(int(rng.integers(1, 5))):
+                a, b = rng.integers(0, m), rng.integers(0, k)
+                site[a:a + rng.integers(1, 12), b:b + rng.integers(1, 12)] = False
+        if site.any():
+            yield site
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_nearest_sites_are_scipys_distance_transform_ties_included(seed):
+    n_cases = 0
+    for site in _site_masks(seed, 600):
+        _, (ry, rx) = ndimage.distance_transform_edt(~site, return_indices=True)
+        iy = np.empty(site.shape, np.int64)
+        ix = np.empty(site.shape, np.int64)
+        _crops.nearest_sites(site, np.ones(site.shape[0], bool), iy, ix)
+        np.testing.assert_array_equal(iy, ry)
+        np.testing.assert_array_equal(ix, rx)
+        need = np.random.default_rng(n_cases).random(site.shape[0]) < 0.3  # some rows only
+        iy[:], ix[:] = -7, -7
+        _crops.nearest_sites(site, need, iy, ix)
+        np.testing.assert_array_equal(iy[need], ry[need])
+        np.testing.assert_array_equal(ix[need], rx[need])
+        n_cases += 1
+    assert n_cases > 500
+
+
+def test_fill_depth_holes_nearest_part_is_scipys():
+    """The holes outside the triangulation (and every hole with ``"nearest"``) take the value
+    of the pixel scipy's distance transform names."""
+    rng = np.random.default_rng(8)
+    for site in _site_masks(3, 200):
+        z = rng.normal(size=site.shape)
+        _, (ry, rx) = ndimage.distance_transform_edt(~site, return_indices=True)
+        ref = np.where(site, z, z[ry, rx])
+        np.testing.assert_array_equal(fill_depth_holes(z, site, "nearest"), ref)
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 5), (2, 2), (2, 7), (3, 3), (6, 1), (14, 57)])

@@ -539,8 +539,8 @@ def test_train_detector_from_samples_gives_a_working_model(tmp_path):
 
 
 def test_table_fits_are_memoised_by_content_and_change_no_result():
-    from dlsr.detection import grid
-    from dlsr.detection.grid import table_surface
+    from dlsr.detection import table as grid
+    from dlsr.detection.table import table_surface
 
     depth, valid, _ = _range_scene(2)
     plain = np.zeros_like(depth)  # all missing: no table
@@ -649,3 +649,16 @@ def test_masked_patches_whitened_on_their_valid_rows_score_as_the_whole_products
         valid_rows = np.flatnonzero(M[t].reshape(6, 48).any(axis=1))
         expected = (valid_rows[0], valid_rows[-1] + 1) if len(valid_rows) else (0, 0)
         assert tuple(spans[:, t]) == expected
+    # the spans read from the canvas, and the rows gathered alone, are the gathered ones
+    direct = np.empty_like(spans)
+    _dense.patch_row_spans(msk, rows, cols, direct[0], direct[1])
+    np.testing.assert_array_equal(direct, spans)
+    X = whole._gather(img, msk, rows, cols, mean, inv, full)
+    bad = ~full[rows, cols]
+    for a, b in ((0, 6), (1, 4), (2, 3), (5, 6)):
+        sel = np.flatnonzero(bad)
+        Xg = np.empty((len(sel), (b - a) * 48), np.float32)
+        Mg = np.empty_like(Xg)
+        _dense.gather_patch_rows(img, msk, rows[sel], cols[sel], mean, inv, a, b, Xg, Mg)
+        np.testing.assert_array_equal(Xg, X[sel, a * 48:b * 48])
+        np.testing.assert_array_equal(Mg, M[sel, a * 48:b * 48])

@@ -1,7 +1,8 @@
 """The planning path's fast parts give what the straightforward code gave, bit for bit: the
 lattice made all at once against one point and one rectangle at a time (the code it replaced,
 kept here as the reference), the convex hull of the rows' end points against that of every
-pixel, and the table fit's memo shared by every way of passing the same image."""
+pixel, the table fit's RANSAC against its loop of single fits, and the table fit's memo shared
+by every way of passing the same image."""
 
 from __future__ import annotations
 
@@ -11,8 +12,15 @@ import pytest
 
 from dlsr.datasets import check_camera_matrix
 from dlsr.detection import complete_region, lattice_candidates, table_plane_mask, table_surface
-from dlsr.detection.grid import _REGIONS, _TABLE_FITS, _row_ends
 from dlsr.detection.lattice import _lattice_array, _max_width_px, chords, lattice_step
+from dlsr.detection.table import (
+    _REGIONS,
+    _TABLE_ARRAYS,
+    _TABLE_FITS,
+    _ransac_plane,
+    _row_ends,
+    _table_surface,
+)
 from dlsr.rectangles import GraspRectangle
 
 K = np.array([[550.0, 0, 64], [0, 540.0, 48], [0, 0, 1]])
@@ -124,6 +132,10 @@ def test_lattice_made_at_once_is_the_lattice_made_one_rectangle_at_a_time(seed, 
         expected = np.array([r.as_array() for r in fresh]).reshape(-1, 5)
         assert arr.shape == expected.shape and np.array_equal(arr, expected)
         assert len(keys) == len(fresh)
+        # the detector's call, without keys: the same array
+        quick, none = _lattice_array(mask, depth, K, offset, max_opening, (10.0, 28.0),
+                                     widest_in_reach=widest, with_keys=False)
+        assert np.array_equal(quick, arr) and none == []
         n_total += len(ref)
     assert seen_new == seen_ref
     assert n_total > 100
@@ -215,7 +227,7 @@ def test_content_key_digests_float32_depth_once_and_tells_finer_float64_apart():
     """The memo key digests depth as float32 when float32 holds it exactly: float32 depth and
     the same values in float64 share a key; float64 depth that float32 would round does not
     share the key of its rounding (the fit reads the float64 values)."""
-    from dlsr.detection.grid import _content_key
+    from dlsr.detection.table import _content_key
 
     depth, valid, _ = _depth_scene()
     d32 = np.asarray(depth, dtype=np.float32)
@@ -225,3 +237,71 @@ def test_content_key_digests_float32_depth_once_and_tells_finer_float64_apart():
     finer[np.asarray(valid, dtype=bool)] += 1e-12
     assert _content_key(finer, valid) != _content_key(d32, valid)
     assert _content_key(finer, valid) == _content_key(finer.copy(), valid)
+
+
+def _reference_ransac(A, inv, z, loose, rng, n_iter):
+    """RANSAC as a loop of single fits (the code before the stacked solve and the compiled
+    counts)."""
+    best, best_n = None, -1
+    for _ in range(n_iter):
+        idx = rng.choice(len(z), 3, replace=False)
+        try:
+            coef = np.linalg.solve(A[idx], inv[idx])
+        except np.linalg.LinAlgError:
+            continue
+        inl = np.abs(1.0 / np.maximum(A @ coef, 1e-9) - z) < loose
+        n = int(inl.sum())
+        if n > best_n:
+            best, best_n = inl, n
+    return best, best_n
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_ransac_is_the_loop_of_single_fits(seed):
+    rng = np.random.default_rng(seed)
+    n = 3000
+    x, y = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
+    z = 1.0 / (0.9 + 0.05 * x - 0.03 * y) + rng.normal(0, 0.002, n)
+    z[: n // 4] -= rng.uniform(0.01, 0.1, n // 4)  # an object in front
+    cases = [(x, y, z, None)]
+    # a grid of pixels: repeated coordinates, singular draws (three points on a line), and
+    # points lying exactly on the inlier band's edge
+    gx, gy = np.meshgrid(np.linspace(-1, 1, 7), np.linspace(-1, 1, 5))
+    zg = np.round(1.0 / (1.0 + 0.25 * gx.ravel()), 3)
+    cases.append((gx.ravel(), gy.ravel(), zg, None))
+    # points at 3 mm from the plane 1/z = 1, on the edge of a 3 mm band: verdicts decided by
+    # the last bit, counted again by the reference expression
+    xe, ye = rng.integers(-4, 5, 60) / 4, rng.integers(-4, 5, 60) / 4
+    cases.append((xe, ye, np.where(rng.random(60) < 0.5, 1.0, 1.003), 0.003))
+    # every draw singular (all points on a line): no plane
+    cases.append((np.linspace(-1, 1, 40), np.zeros(40), np.ones(40), None))
+    for x, y, z, edge in cases:
+        A = np.column_stack([x, y, np.ones_like(x)])
+        loose = np.maximum(0.025 * z, 0.003) if edge is None else np.full(len(z), edge)
+        for state in (0, seed + 7):
+            ref = _reference_ransac(A, 1.0 / z, z, loose, np.random.default_rng(state), 100)
+            new = _ransac_plane(A, 1.0 / z, z, loose, np.random.default_rng(state), 100)
+            assert new[1] == ref[1]
+            assert (new[0] is None) == (ref[0] is None)
+            assert ref[0] is None or np.array_equal(new[0], ref[0])
+
+
+def test_table_arrays_memo_hands_out_copies_of_what_a_fit_gives():
+    depth, valid, _ = _depth_scene()
+    _TABLE_FITS.clear()
+    _TABLE_ARRAYS.clear()
+    d = np.where(valid > 0, depth, 1.0).astype(np.float64)
+    fresh = _table_surface(d, valid > 0)
+    first = table_surface(depth, valid)
+    assert np.array_equal(first, fresh[0])
+    first[:] = 0.0  # a caller changing its surface changes no later answer
+    again = table_surface(depth, valid)
+    assert np.array_equal(again, fresh[0])
+    region, surface = table_plane_mask(depth, valid, return_surface=True)
+    assert np.array_equal(surface, fresh[0])
+    _TABLE_ARRAYS.clear()  # the fit known, its arrays recomputed: the same
+    assert np.array_equal(table_surface(depth, valid), fresh[0])
+    assert np.array_equal(table_plane_mask(depth, valid), region)
+    _TABLE_FITS.clear()
+    _TABLE_ARRAYS.clear()
+    _REGIONS.clear()
