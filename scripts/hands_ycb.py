@@ -12,7 +12,8 @@ is chosen on these scenes. DLSR and GG-CNN are made aware of each row's hand
 (:func:`graspsim.detectors.gripper_aware`), as in the curve; the paper's DLSR runs its dense
 search as the paper does. ``dlsr-hand`` is DLSR with the training data chosen for the row's
 hand on validation scenes of the YCB train objects (``scripts/hands_dlsr_choice.py``,
-``results/hand-choice``); it is a default column once that choice has been made.
+``results/hand-choice``); it is not a default column: add it with ``--detectors`` for rows
+whose hand has a choice (the WSG 50's choice is the curve's model, the ``dlsr`` column itself).
 
 The cells grow in steps (25, 50, 100, 150, 200 trials; 6 ... 200 rounds), so whatever has
 finished when the script is stopped covers every cell; a rerun resumes. ``OUT/results.json``
@@ -88,9 +89,7 @@ def main(argv=None) -> int:
     ap.add_argument("--objects", default="ycb:test")
     ap.add_argument("--out", type=Path, default=REPO / "results" / "hands-ycb")
     ap.add_argument("--rows", default=",".join(HANDS + CLUTTER))
-    chosen = (CHOICE / "choice.json").is_file()
-    ap.add_argument("--detectors",
-                    default=",".join(DETECTORS + (("dlsr-hand",) if chosen else ())))
+    ap.add_argument("--detectors", default=",".join(DETECTORS))
     ap.add_argument("--steps", type=int, default=None,
                     help="growth steps to run (default: all, up to 200 trials and rounds)")
     ap.add_argument("--jobs", type=int, default=2)
