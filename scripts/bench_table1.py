@@ -9,9 +9,9 @@ a temporary folder), each in a child process, alternated so that both see the sa
   dictionary and the ST features of every ST penalty plus NKM-Natural's are computed once (by
   this checkout, cached in ``--cache``); then each side times the benchmark's inner
   cross-validation of those parameters (5 inner folds, the paper's C grid) and the outer refit
-  at the chosen parameters. Reported: seconds, the choices, inner accuracies and test
-  predictions of both sides, their differences, and the largest relative difference of the
-  refit's decision values.
+  at the chosen parameters. Reported: seconds, the choices, the mean inner accuracy of every
+  (parameter, C) (compared bit for bit) and the test predictions of both sides, and their
+  differences.
 * ``coding`` (``--coding``): the features of every encoder over its whole grid (one call of
   ``rectangle_features_multi``, as a fold task makes) for ``--coding-rectangles`` training
   rectangles of outer fold 0 of the ``--images`` set, per learner of ``--coding-learners``
@@ -163,7 +163,10 @@ def _child_svm(features: Path, out: Path) -> None:
 
     from dlsr import recognition as rec
 
-    memo_ok = "memo" in inspect.signature(rec._choose).parameters  # this checkout
+    # the public names since af1314b (inner_choice, outer_test), the private ones before
+    choose = getattr(rec, "inner_choice", None) or rec._choose
+    test = getattr(rec, "outer_test", None) or rec._test
+    memo_ok = "memo" in inspect.signature(choose).parameters
     z = np.load(features)
     inner = rec.outer_folds(z["g_tr"], 5)
     C_grid = rec.PAPER_C_GRID
@@ -174,19 +177,22 @@ def _child_svm(features: Path, out: Path) -> None:
         feats = dict(zip(params, tr, strict=True))
         t, c = time.perf_counter(), time.process_time()
         memo: dict = {}
-        choice = rec._choose(feats, y_tr, inner, C_grid, *([memo] if memo_ok else []))
+        choice = choose(feats, y_tr, inner, C_grid, *([memo] if memo_ok else []))
         t_inner, c_inner = time.perf_counter() - t, time.process_time() - c
+        # every (parameter, C)'s mean inner accuracy (repr: compared bit for bit)
+        grid = ({repr(p): [repr(float(np.mean(a))) for a in memo[id(feats[p])][1]]
+                 for p in params} if memo_ok else None)
         k = params.index(choice[1])
         t, c = time.perf_counter(), time.process_time()
         if memo_ok:  # as the benchmark refits: from the last inner fold's solution
             start = memo[id(feats[choice[1]])][2][list(C_grid).index(choice[2])]
-            res = rec._test(tr[k], te[k], y_tr, y_te, choice, start=start)
+            res = test(tr[k], te[k], y_tr, y_te, choice, start=start)
         else:
-            res = rec._test(tr[k], te[k], y_tr, y_te, choice)
+            res = test(tr[k], te[k], y_tr, y_te, choice)
         t_refit, c_refit = time.perf_counter() - t, time.process_time() - c
         result[name] = {"inner_seconds": t_inner, "inner_cpu_seconds": c_inner,
                         "refit_seconds": t_refit, "refit_cpu_seconds": c_refit,
-                        "choice": [choice[0], choice[1], choice[2]],
+                        "choice": [choice[0], choice[1], choice[2]], "inner_grid": grid,
                         "predictions": res["predictions"], "accuracy": res["accuracy"],
                         "n_train": len(y_tr), "n_features": int(tr.shape[2])}
     out.write_text(json.dumps(result))
@@ -246,6 +252,8 @@ def _compare_svm(old: dict, new: dict) -> dict:
             "choice_reference": o["choice"], "choice_now": n["choice"],
             "inner_accuracy_difference": n["choice"][0] - o["choice"][0],
             "same_choice": o["choice"][1:] == n["choice"][1:],
+            "same_inner_accuracies": (o.get("inner_grid") == n.get("inner_grid")
+                                      if o.get("inner_grid") is not None else None),
             "test_predictions_differing": int(np.sum(po != pn)),
             "test_accuracy": [o["accuracy"], n["accuracy"]],
         }

@@ -394,3 +394,171 @@ def test_the_solution_does_not_depend_on_the_blas_threads():
         for a, b in zip(*fits, strict=True):
             assert np.asarray(a[0]).tobytes() == np.asarray(b[0]).tobytes()
             assert float(a[1]) == float(b[1])
+
+
+def _factorised_solution(system, idx, lam):
+    """The solution of the system on rows ``idx`` by a factorisation of its own ``H``."""
+    A = system._full(lam)
+    y_S = np.zeros(len(system.y))
+    y_S[idx] = system.y[idx]
+    return np.linalg.solve(A, np.r_[system.X.T @ y_S, y_S.sum()])
+
+
+@pytest.mark.parametrize("lam", [0.05, 5.0, 500.0])
+def test_primal_solves_near_the_factorised_violators_use_its_factor(lam, monkeypatch):
+    """A system whose violators differ from the last factorised one's by a few rows is solved
+    with that factor (Woodbury, refined) to the rounding of a factorisation of its own; a
+    larger change, or a new penalty, factorises again."""
+    from dlsr import svm
+
+    monkeypatch.setattr(svm, "_LOW_RANK_MIN_FEATURES", 0)  # small test problems
+
+    rng = np.random.default_rng(5)
+    n, d = 400, 47  # (d + 1) / 8 = 6 rows may differ
+    X = rng.normal(size=(n, d)) + 0.3
+    y = np.where(rng.random(n) < 0.4, 1.0, -1.0)
+    system = svm._PrimalSystem(X, y)
+    S = rng.random(n) < 0.7
+    system.solve(np.flatnonzero(S), lam)
+    assert (system.n_factorisations, system.n_low_rank) == (1, 0)
+    base = S.copy()
+    expect_low = 0
+    for n_enter, n_leave in ((2, 0), (0, 3), (3, 3), (1, 2), (5, 1)):
+        S = base.copy()
+        S[rng.choice(np.flatnonzero(~base), n_enter, replace=False)] = True
+        S[rng.choice(np.flatnonzero(base), n_leave, replace=False)] = False
+        idx = np.flatnonzero(S)
+        w, b = system.solve(idx, lam)
+        expect_low += 1
+        assert (system.n_factorisations, system.n_low_rank) == (1, expect_low)
+        x = _factorised_solution(system, idx, lam)
+        np.testing.assert_allclose(np.r_[w, b], x, rtol=0, atol=1e-12 * np.abs(x).max())
+    # more rows than (d + 1) / 8 differ from the factorised set: a new factorisation
+    S = base.copy()
+    S[np.flatnonzero(base)[:10]] = False
+    system.solve(np.flatnonzero(S), lam)
+    assert (system.n_factorisations, system.n_low_rank) == (2, expect_low)
+    # the same violators under another penalty: factorised too
+    system.solve(np.flatnonzero(S), 2.0 * lam)
+    assert system.n_factorisations == 3
+
+
+def test_a_low_rank_solve_that_does_not_converge_factorises(monkeypatch):
+    from dlsr import svm
+
+    monkeypatch.setattr(svm, "_LOW_RANK_MIN_FEATURES", 0)  # small test problems
+
+    rng = np.random.default_rng(6)
+    X = rng.normal(size=(300, 31))
+    y = np.where(rng.random(300) < 0.5, 1.0, -1.0)
+    monkeypatch.setattr(svm, "_REFINE_TOL", 0.0)  # no correction is ever small enough
+    system = svm._PrimalSystem(X, y)
+    S = np.arange(300) % 3 > 0
+    system.solve(np.flatnonzero(S), 2.0)
+    S[:4] = ~S[:4]
+    w, b = system.solve(np.flatnonzero(S), 2.0)
+    assert (system.n_factorisations, system.n_low_rank) == (2, 0)
+    x = _factorised_solution(system, np.flatnonzero(S), 2.0)
+    np.testing.assert_allclose(np.r_[w, b], x, rtol=0, atol=1e-12 * np.abs(x).max())
+
+
+def test_newton_with_low_rank_solves_reaches_the_factorised_minimiser(monkeypatch):
+    """The whole solver, with and without the low-rank solves, reaches the same minimiser
+    (primal form, several C, each warm-started) in the same number of Newton steps."""
+    from dlsr import svm
+
+    monkeypatch.setattr(svm, "_LOW_RANK_MIN_FEATURES", 0)  # small test problems
+
+    X, y = _planted(900, 120, seed=17)
+    used = []
+    low_rank_solve = svm._PrimalSystem._low_rank_solve
+
+    def counted(self, *args):
+        x = low_rank_solve(self, *args)
+        used.append(x is not None)
+        return x
+
+    monkeypatch.setattr(svm._PrimalSystem, "_low_rank_solve", counted)
+    with_low = squared_hinge_fit(X, y, C_VALUES, form="primal")
+    assert sum(used) >= 3  # the low-rank solves did serve
+    monkeypatch.setattr(svm._PrimalSystem, "_low_rank_solve", lambda *args: None)  # factorise
+    without = squared_hinge_fit(X, y, C_VALUES, form="primal")
+    for (w1, b1, n1), (w0, b0, n0) in zip(with_low, without, strict=True):
+        assert n1 == n0
+        scale = max(np.abs(w0).max(), abs(b0))
+        np.testing.assert_allclose(w1, w0, rtol=0, atol=1e-10 * scale)
+        assert abs(b1 - b0) <= 1e-10 * scale
+        np.testing.assert_array_equal(X @ w1 + b1 > 0, X @ w0 + b0 > 0)
+
+
+def test_an_approximate_first_step_per_c_reaches_the_same_minimiser(monkeypatch):
+    """Each warm-started C's first step may aim at a conjugate-gradient approximation
+    preconditioned by the previous penalty's factor (primal form): the solver reaches the
+    same minimiser as with exact steps only, with the same signs of every decision value."""
+    from dlsr import svm
+
+    monkeypatch.setattr(svm, "_LOW_RANK_MIN_FEATURES", 0)  # small test problems
+
+    X, y = _planted(900, 120, seed=19)
+    used = []
+    approximate = svm._PrimalSystem.approximate
+
+    def counted(self, *args):
+        out = approximate(self, *args)
+        used.append(out is not None)
+        return out
+
+    monkeypatch.setattr(svm._PrimalSystem, "approximate", counted)
+    with_approx = squared_hinge_fit(X, y, C_VALUES, form="primal")
+    assert sum(used) >= 2  # the approximations did serve (not for the first C)
+    monkeypatch.setattr(svm._PrimalSystem, "approximate", lambda *args: None)
+    exact = squared_hinge_fit(X, y, C_VALUES, form="primal")
+    for (w1, b1, _), (w0, b0, _), C in zip(with_approx, exact, C_VALUES, strict=True):
+        scale = max(np.abs(w0).max(), abs(b0))
+        np.testing.assert_allclose(w1, w0, rtol=0, atol=1e-10 * scale)
+        assert abs(b1 - b0) <= 1e-10 * scale
+        np.testing.assert_array_equal(X @ w1 + b1 > 0, X @ w0 + b0 > 0)
+        g = _grad(w1, b1, X, y, C)
+        assert np.linalg.norm(g) <= 1e-6 * np.linalg.norm(_grad(np.zeros(120), 0.0, X, y, C))
+
+
+def test_the_approximation_needs_a_factor_of_nearby_violators(monkeypatch):
+    """No factor yet, the same penalty as the factor's, or violators too far from the
+    factorised ones: no approximation (the step is solved exactly)."""
+    from dlsr import svm
+
+    monkeypatch.setattr(svm, "_LOW_RANK_MIN_FEATURES", 0)  # small test problems
+
+    rng = np.random.default_rng(8)
+    X = rng.normal(size=(300, 39))
+    y = np.where(rng.random(300) < 0.5, 1.0, -1.0)
+    system = svm._PrimalSystem(X, y)
+    idx = np.flatnonzero(np.arange(300) % 4 > 0)
+    w, b = np.zeros(39), 0.0
+    assert system.approximate(idx, 2.0, w, b) is None  # no factor
+    system.solve(idx, 2.0)
+    assert system.approximate(idx, 2.0, w, b) is None  # the factor's own penalty
+    assert system.approximate(idx[20:], 0.2, w, b) is None  # 20 rows > 40 / 8
+    w1, b1 = system.approximate(idx[2:], 0.2, w, b)  # 2 rows left: approximated
+    assert system.n_approximate == 1 and system.n_factorisations == 1
+    x = _factorised_solution(system, idx[2:], 0.2)
+    assert np.linalg.norm(np.r_[w1, b1] - x) < 0.5 * np.linalg.norm(x)  # towards it
+
+
+def test_small_problems_always_factorise(monkeypatch):
+    """Below ``_LOW_RANK_MIN_FEATURES`` features every system is factorised (cheaper there)."""
+    from dlsr import svm
+
+    X, y = _planted(600, 60, seed=23)
+    systems = []
+    init = svm._PrimalSystem.__init__
+
+    def recorded(self, *args):
+        init(self, *args)
+        systems.append(self)
+
+    monkeypatch.setattr(svm._PrimalSystem, "__init__", recorded)
+    squared_hinge_fit(X, y, C_VALUES, form="primal")
+    (system,) = systems
+    assert system.n_factorisations > len(C_VALUES)
+    assert system.n_low_rank == system.n_approximate == 0
