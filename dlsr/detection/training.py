@@ -494,8 +494,9 @@ def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDete
     -------
     list of DLSRDetector
         In the order of ``models``. Each model's ``config["train_seconds"]`` counts the shared
-        work in full (what it takes alone) and ``config["shared_train_seconds"]`` says how
-        much of it was shared.
+        work in full (what it takes alone), ``config["shared_train_seconds"]`` says how
+        much of it was shared and ``config["training_data_seconds"]`` how much of that the
+        training rectangles took (the rest is the representation).
     """
     from ..features import fit_representation
 
@@ -540,6 +541,7 @@ def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDete
         extra_s = shared["data"] + shared[m["learner"]]
         model.config["train_seconds"] += extra_s
         model.config["shared_train_seconds"] = extra_s
+        model.config["training_data_seconds"] = shared["data"]
         out.append(model)
     return out
 
