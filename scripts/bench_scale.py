@@ -6,20 +6,25 @@ under ``--standin``; the smaller sizes are its first images):
 * **table1**: ``graspsim benchmark recognition`` with all 36 learner x encoder cells,
   ``--atoms 300``, nested 5 x 5 cross-validation, the paper's hyper-parameter grids
   (``--paper-grid``), image-wise;
-* **table2**: ``graspsim benchmark detection`` for the rows of the paper's Table 2 that it
-  records (NKM-Natural, NKM-SC, OMP-Natural, RP-Natural), image-wise and object-wise, 5 folds.
+* **table2**: ``graspsim benchmark table2``, the rows of the paper's Table 2 that it records
+  (NKM-Natural, NKM-SC, OMP-Natural, RP-Natural), image-wise and object-wise, 5 folds, in one
+  pass (the training sets, the NKM dictionary and each test image's work shared; the same
+  records as one ``graspsim benchmark detection`` per row and split, which sizes measured
+  before it was used ran: their timings say ``one_pass`` only when measured with it).
 
 Each command runs as a child process with ``--jobs`` workers. Per size and table: ``wall_s``,
 ``cpu_s`` (the whole process tree's user + system seconds, from ``getrusage``),
 ``peak_rss_mb`` (the largest sum of the tree's resident memory, sampled every 0.2 s from
 ``/proc``) and ``stages``: worker seconds per stage, read from the commands' own records --
 Table 1: ``patches``, ``whitening``, ``dictionary`` (the representations), ``coding`` and
-``svm_inner_cv``; Table 2: ``detection_per_image`` (mean seconds per test image) and
-``detection`` (their sum). ``rss_trace_mb`` is the peak memory in each tenth of the run's wall
-time (flat when nothing accumulates across cells and folds). ``growth`` gives, per table and
-stage, the exponent ``k`` of a least-squares fit of ``time = a * size^k`` over the sizes
-measured, and ``projected`` the fit's ``wall_s`` and ``cpu_s`` at Cornell's 885 images when that
-size was not measured (a projection, not a measurement).
+``svm_inner_cv``; Table 2: ``detection_per_image`` (mean seconds per test image and row; in
+the one pass each row's seconds count the candidates and rectangle images it shares in full,
+so ``detection``, their sum, is an upper bound of the pass's detection time).
+``rss_trace_mb`` is the peak memory in each tenth of the run's wall time (flat when nothing
+accumulates across cells and folds). ``growth`` gives, per table and stage, the exponent ``k``
+of a least-squares fit of ``time = a * size^k`` over the sizes measured, and ``projected`` the
+fit's ``wall_s`` and ``cpu_s`` at Cornell's 885 images when that size was not measured (a
+projection, not a measurement).
 
 The stand-in is always Cornell's size (``--standin-images``), so a size means the same
 images whichever sizes a run asks for; each size's record names its data (``data``: the
@@ -282,7 +287,7 @@ def main(argv=None) -> int:
     ap.add_argument("--standin-images", type=int, default=CORNELL["images"],
                     help="the stand-in's size; every size measured is its first images")
     ap.add_argument("--detection-preset", default=None,
-                    help="graspsim benchmark detection's --preset for Table 2 (default: the "
+                    help="graspsim benchmark table2's --preset for Table 2 (default: the "
                          "command's default, what a user runs; 'paper' times the paper's dense "
                          "search); recorded with the timings")
     ap.add_argument("--seed", type=int, default=0)
@@ -333,7 +338,8 @@ def _run(args) -> int:
             if partial_path.exists():
                 partial = read_json(partial_path, "partial timings")
                 for key in [k for k in partial
-                            if k == f"table1_{size}" or k.startswith(f"table2_{size}_")]:
+                            if k in (f"table1_{size}", f"table2_{size}")
+                            or k.startswith(f"table2_{size}_")]:
                     del partial[key]
                 write_json_atomic(partial_path, partial, indent=1)
             row.clear()
@@ -352,28 +358,18 @@ def _run(args) -> int:
             row["table1"] = {**t, "stages": table1_stages(dest)}
             write_json_atomic(timings_path, timings, indent=1)
         if "2" in tables and "table2" not in row:
-            runs = row.setdefault("table2_runs", {})  # each command's timing as it finishes
-            dests = []
+            # every row and split in one pass (graspsim benchmark table2: the same records as
+            # one detection command per row and split, in the same per-row folders)
+            dest = out / f"table2_{size}"
             preset = ["--preset", args.detection_preset] if args.detection_preset else []
-            for learner, encoder in TABLE2_ROWS:
-                for split in ("image", "object"):
-                    dest = out / f"table2_{size}_{learner}-{encoder}_{split}"
-                    dests.append(dest)
-                    if dest.name in runs:
-                        continue
-                    runs[dest.name] = resumed(dest.name, graspsim + [
-                        "benchmark", "detection", *common, "--learner", learner, "--encoder",
-                        encoder, "--split", split, "--folds", "5", "--overlays", "0", *preset,
-                        "--out", str(dest)], partial_path)
-                    write_json_atomic(timings_path, timings, indent=1)
-            parts = [runs[d.name] for d in dests]
-            row["table2"] = {"wall_s": round(sum(p["wall_s"] for p in parts), 2),
-                             "cpu_s": round(sum(p["cpu_s"] for p in parts), 2),
-                             "peak_rss_mb": max(p["peak_rss_mb"] for p in parts),
-                             "rss_trace_mb": [p["rss_trace_mb"] for p in parts],
-                             "stages": table2_stages(dests),
-                             "detector": table2_detector(dests[0])}
-            del row["table2_runs"]
+            row.pop("table2_runs", None)  # the separate commands' timings of an older run
+            t = resumed(dest.name, graspsim + [
+                "benchmark", "table2", *common, "--split", "image,object", "--folds", "5",
+                "--overlays", "0", *preset, "--out", str(dest)], partial_path)
+            dests = [dest / f"{learner}-{encoder}_{split}" for learner, encoder in TABLE2_ROWS
+                     for split in ("image", "object")]
+            row["table2"] = {**t, "stages": table2_stages(dests),
+                             "detector": table2_detector(dests[0]), "one_pass": True}
             write_json_atomic(timings_path, timings, indent=1)
     result = {"machine": {"cpus": os.cpu_count(), "jobs": args.jobs,
                           "platform": sys.platform},

@@ -100,10 +100,11 @@ Modules
 * :mod:`dlsr.detection.table`: the table fitted to the depth, the object standing on it;
 * :mod:`dlsr.detection.model`: :class:`DLSRDetector` and its files;
 * :mod:`dlsr.detection.training`: negatives, training data, :func:`fit_search_grid`,
-  :func:`train_detector`;
+  :func:`train_detector`, :func:`train_detectors` (several models, the shared work once);
 * :mod:`dlsr.detection.exact`: :class:`Detection`, :class:`ExactGridDetector`;
 * :mod:`dlsr.detection.dense`: :class:`DenseDetector`;
-* :mod:`dlsr.detection.lattice`: :func:`lattice_candidates`, :class:`LatticeDetector`;
+* :mod:`dlsr.detection.lattice`: :func:`lattice_candidates`, :class:`LatticeDetector`,
+  :func:`detect_many` (several models on one observation, the shared work done once);
 * :mod:`dlsr.detection.physical`: :func:`physical_features`, :class:`PhysicalEncoder`;
 * :mod:`dlsr.detection.files`: :func:`detect_files` (``graspsim detect``).
 
@@ -147,7 +148,7 @@ from .grid import (  # noqa: F401
     valid_depth,
     within_reach,
 )
-from .lattice import LatticeDetector, lattice_candidates, max_width_px
+from .lattice import LatticeDetector, detect_many, lattice_candidates, max_width_px
 from .model import (  # noqa: F401
     DETECTOR_KINDS,
     FORMAT_VERSION,
@@ -170,11 +171,13 @@ from .training import (
     sample_grid_negatives,
     sample_observation,
     train_detector,
+    train_detectors,
 )
 
 __all__ = [
     "DETECTOR_KINDS",
     "LatticeDetector",
+    "detect_many",
     "lattice_candidates",
     "max_width_px",
     "PHYSICAL_FEATURES",
@@ -188,6 +191,7 @@ __all__ = [
     "ExactGridDetector",
     "DenseDetector",
     "train_detector",
+    "train_detectors",
     "detection_training_data",
     "sample_grid_negatives",
     "fit_search_grid",

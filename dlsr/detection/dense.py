@@ -498,6 +498,32 @@ class DenseDetector(_Base):
         with _one_blas_thread(), self._pool() as pool:
             return self._exact_scores(obs, rects, pool)
 
+    def exact_images(self, obs, rects):
+        """The rectangle images of :meth:`exact_scores` and their patches' statistics, which
+        depend on the model's preprocessing only: computed once, they are scored by every
+        model of the same preprocessing (:meth:`score_images`).
+
+        Returns
+        -------
+        tuple or None
+            Opaque inputs of :meth:`score_images` (None for no rectangle).
+        """
+        with _one_blas_thread(), self._pool() as pool:
+            return self._exact_images(obs, rects, pool)
+
+    def score_images(self, images) -> np.ndarray:
+        """:meth:`exact_scores` of the rectangles of ``images`` (from :meth:`exact_images` of
+        a detector whose model has this model's preprocessing), bit for bit.
+
+        Returns
+        -------
+        ndarray of shape (n,), float64
+        """
+        if images is None:
+            return np.zeros(0)
+        with _one_blas_thread(), self._pool() as pool:
+            return self._score_images(images, pool)
+
     # -- internals ---------------------------------------------------------------------------
     def _physical_term(self, obs, region):
         """``rects -> the model's physical scores`` (zeros without one; the table is fitted
@@ -527,12 +553,16 @@ class DenseDetector(_Base):
         return _Source(obs, self.model.preprocess, roi, self.fill)
 
     def _exact_scores(self, obs, rects, pool) -> np.ndarray:
+        images = self._exact_images(obs, rects, pool)
+        return np.zeros(0) if images is None else self._score_images(images, pool)
+
+    def _exact_images(self, obs, rects, pool):
         from .. import _dense
         from ..preprocess import rectangle_images
 
         rects = np.asarray(rects, dtype=float).reshape(-1, 5)
         if len(rects) == 0:
-            return np.zeros(0)
+            return None
         pre = dict(self.model.preprocess)
         pre["size"] = SIZE
         pre["locate"] = "compiled"  # the holes' values up to float rounding, 5 times sooner
@@ -542,8 +572,6 @@ class DenseDetector(_Base):
         n = len(rects)
         img = np.concatenate([m[0] for m in made]).reshape(n * SIZE, SIZE, 8)
         msk = np.concatenate([m[1] for m in made]).reshape(n * SIZE, SIZE, 8)
-        V, const = self.model.quadrant_weights()
-        scorer = _PatchScorer(self.model, V, by_rows=True)
         Hp = n * SIZE - PATCH + 1
         mean = np.empty((Hp, GRID, 4), np.float32)
         inv = np.empty((Hp, GRID, 4), np.float32)
@@ -553,6 +581,12 @@ class DenseDetector(_Base):
         rows = (np.arange(n)[:, None, None] * SIZE + g[None, :, None]
                 + np.zeros(GRID, np.intp)[None, None, :]).ravel()
         cols = np.broadcast_to(g[None, None, :], (n, GRID, GRID)).ravel()
+        return n, img, msk, rows, cols, mean, inv, full
+
+    def _score_images(self, images, pool) -> np.ndarray:
+        n, img, msk, rows, cols, mean, inv, full = images
+        V, const = self.model.quadrant_weights()
+        scorer = _PatchScorer(self.model, V, by_rows=True)
         per = max(1, self.chunk_size // PATCHES_PER_RECTANGLE) * PATCHES_PER_RECTANGLE
         spans = [(s, min(s + per, len(rows))) for s in range(0, len(rows), per)]
         S = np.concatenate(_map(pool, lambda se: scorer.scores(

@@ -480,4 +480,93 @@ class LatticeDetector:
         return self.detect(obs).rectangles()
 
 
+def detect_many(detectors, obs) -> list[Detection]:
+    """Every detector's :meth:`~LatticeDetector.detect` on one observation, the shared work
+    done once.
+
+    Lattice detectors that differ only in their model, whose models preprocess alike and are
+    all physical or all not, lay the same candidates and cut the same rectangle images: both
+    are computed once (:meth:`LatticeDetector.candidates`,
+    :meth:`dlsr.detection.DenseDetector.exact_images`) and scored by each model
+    (:meth:`dlsr.detection.DenseDetector.score_images`), which gives each detector's own
+    detection bit for bit. Other detectors detect one by one.
+
+    Parameters
+    ----------
+    detectors : sequence of objects with ``detect(obs)``
+    obs : dict
+        An observation (``rgb``, ``depth``, ``depth_valid``, ``K`` ...).
+
+    Returns
+    -------
+    list of Detection
+        One per detector, in their order. With shared work, a detection's ``seconds`` counts
+        the shared candidates and rectangle images in full (what the detector alone takes)
+        and its ``timings`` add ``shared`` (those seconds).
+    """
+    from .dense import DenseDetector
+
+    detectors = list(detectors)
+    if not detectors or not _share_search(detectors):
+        return [d.detect(obs) for d in detectors]
+    first = detectors[0]
+    t0 = time.perf_counter()
+    cand, reason, region = first.candidates(obs)
+    if reason:
+        shared = time.perf_counter() - t0
+        out = []
+        for _ in detectors:
+            empty = _empty(reason, time.perf_counter())
+            empty.seconds += shared
+            out.append(empty)
+        return out
+    t1 = time.perf_counter()
+    images = DenseDetector(first.model, n_threads=first.n_threads).exact_images(obs, cand)
+    shared = time.perf_counter() - t0
+    table = None
+    out = []
+    for d in detectors:
+        t2 = time.perf_counter()
+        exact = DenseDetector(d.model, n_threads=d.n_threads).score_images(images)
+        if d.model.physical and table is None:
+            table = table_surface(obs["depth"], obs.get("depth_valid"))
+        scores = exact + d.model.physical_scores(obs, cand, region, table)
+        order = np.argsort(-scores, kind="stable")[: d.top_k]
+        own = time.perf_counter() - t2
+        out.append(Detection(cand[order], scores[order], n_candidates=len(cand),
+                             n_encodings=len(cand) * PATCHES_PER_RECTANGLE,
+                             seconds=shared + own,
+                             timings={"candidates": t1 - t0, "score": shared - (t1 - t0) + own,
+                                      "shared": shared}))
+    return out
+
+
+def _share_search(detectors) -> bool:
+    """Whether ``detectors`` are lattice detectors that lay the same candidates and cut the
+    same rectangle images (they differ in their model only, whose preprocessing and physical
+    flag are the same)."""
+    if not all(type(d) is LatticeDetector for d in detectors):
+        return False
+    first = detectors[0]
+    settings = {k: v for k, v in vars(first).items() if k != "model"}
+    for d in detectors[1:]:
+        other = {k: v for k, v in vars(d).items() if k != "model"}
+        if other.keys() != settings.keys() or any(
+                not _same(other[k], settings[k]) for k in settings):
+            return False
+        if (d.model.preprocess != first.model.preprocess
+                or bool(d.model.physical) != bool(first.model.physical)):
+            return False
+    return True
+
+
+def _same(a, b) -> bool:
+    if a is b:
+        return True
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray)
+                and a.shape == b.shape and bool(np.array_equal(a, b)))
+    return a == b
+
+
 register_detector("lattice", LatticeDetector, grid_search=False)

@@ -8,6 +8,7 @@ Part of :mod:`dlsr.detection`.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import logging
 import os
 import time
@@ -276,6 +277,7 @@ def train_detector(
     physical_bins: int = 6,
     random_state=0,
     data=None,
+    representation=None,
     **config,
 ) -> DLSRDetector:
     """Train the recognition model on the labelled rectangles of ``samples``.
@@ -333,6 +335,10 @@ def train_detector(
         :func:`detection_training_data` with the same ``negatives_per_image``,
         ``grid_negatives`` and (fitted) grid, which are then only recorded in the model's
         config.
+    representation : Representation or None
+        The representation of ``learner`` already fitted on ``data`` with these
+        ``n_atoms``, ``whiten``, ``n_patches``, ``extra_patches`` and ``random_state``
+        (skips its fit; :func:`train_detectors` shares one between models of one learner).
     **config :
         Detector options stored in the model (``detector``, ``grid`` (dict), ``top_k``,
         ``rescore``, ``region``).
@@ -357,16 +363,7 @@ def train_detector(
 
         extra_patches = load_patch_file(extra_patches)
     t0 = time.perf_counter()
-    sgrid = config.get("grid", PAPER_GRID)
-    if isinstance(sgrid, dict):
-        sgrid = SearchGrid.from_dict(sgrid)
-    if fit_grid is not None:
-        from ..rectangles import rects_to_array
-
-        pos = [rects_to_array(s.positives) for s in samples]
-        sgrid = fit_search_grid(np.concatenate(pos) if pos else np.zeros((0, 5)), sgrid,
-                                fit_grid)
-        config["grid"] = sgrid
+    sgrid = _training_grid(samples, config, fit_grid)
     if data is None:
         data = detection_training_data(samples, grid_negatives, sgrid,
                                        config.get("region", "auto"),
@@ -374,9 +371,15 @@ def train_detector(
                                        random_state=random_state)
     if len(np.unique(data.labels)) < 2:
         raise ValueError("training needs positive and negative rectangles")
-    rep = fit_representation(data.images, data.masks, learner, n_atoms=n_atoms, whiten=whiten,
-                             n_patches=n_patches, extra=extra_patches,
-                             random_state=random_state)
+    if representation is None:
+        rep = fit_representation(data.images, data.masks, learner, n_atoms=n_atoms,
+                                 whiten=whiten, n_patches=n_patches, extra=extra_patches,
+                                 random_state=random_state)
+    elif representation.learner != learner:
+        raise ValueError(f"the representation given is {representation.learner!r}'s, "
+                         f"not {learner!r}'s")
+    else:
+        rep = representation
     polarity = not (learner == "NKM" and encoder == "Natural")
     F = rectangle_features(data.images, data.masks, rep, encoder, encoder_param,
                            polarity=polarity)
@@ -449,6 +452,98 @@ def train_detector(
     return DLSRDetector(rep, encoder, encoder_param, polarity, mean[:k], scale[:k], w[:k],
                         intercept, preprocess=_default_preprocess(), config=info,
                         physical_edges=edges, physical_coef=w_phys)
+
+
+def _training_grid(samples, config: dict, fit_grid) -> SearchGrid:
+    """The search grid of a training (``config["grid"]``, the paper's by default), fitted to
+    the positives of ``samples`` with ``fit_grid`` (then also put in ``config``)."""
+    sgrid = config.get("grid", PAPER_GRID)
+    if isinstance(sgrid, dict):
+        sgrid = SearchGrid.from_dict(sgrid)
+    if fit_grid is not None:
+        from ..rectangles import rects_to_array
+
+        pos = [rects_to_array(s.positives) for s in samples]
+        sgrid = fit_search_grid(np.concatenate(pos) if pos else np.zeros((0, 5)), sgrid,
+                                fit_grid)
+        config["grid"] = sgrid
+    return sgrid
+
+
+def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDetector]:
+    """Several detectors trained on the same images, the work they share done once.
+
+    Each model is :func:`train_detector` ``(samples, **model, **options,
+    random_state=random_state)``, bit for bit; the training rectangles (the labelled ones and
+    the grid negatives, :func:`detection_training_data`) do not depend on the learner or the
+    encoder and are made once, and one representation is fitted per learner (the models of
+    one learner, e.g. NKM-Natural and NKM-SC, read the same dictionary).
+
+    Parameters
+    ----------
+    samples : sequence of GraspSample
+        Training images only.
+    models : sequence of dict
+        Per model, its ``learner``, ``encoder`` and optionally ``encoder_param`` and ``C``.
+    random_state : int
+    **options
+        Every other keyword argument of :func:`train_detector`, the same for all models
+        (``n_atoms``, ``grid_negatives``, ``fit_grid``, ``extra_patches``, ``region``...).
+
+    Returns
+    -------
+    list of DLSRDetector
+        In the order of ``models``. Each model's ``config["train_seconds"]`` counts the shared
+        work in full (what it takes alone), ``config["shared_train_seconds"]`` says how
+        much of it was shared and ``config["training_data_seconds"]`` how much of that the
+        training rectangles took (the rest is the representation).
+    """
+    from ..features import fit_representation
+
+    own = {"learner", "encoder", "encoder_param", "C"}
+    for m in models:
+        if not {"learner", "encoder"} <= m.keys() or not m.keys() <= own:
+            raise ValueError(f"each model needs 'learner' and 'encoder' (and optionally "
+                             f"'encoder_param', 'C'), got {sorted(m)}")
+    if own & options.keys() or "data" in options or "representation" in options:
+        raise ValueError("learner, encoder, encoder_param, C, data and representation are "
+                         "per model or shared here, not options")
+    options = dict(options)
+    extra = options.get("extra_patches")
+    if isinstance(extra, (str, os.PathLike)):
+        from ..patches import load_patch_file
+
+        options["extra_patches"] = load_patch_file(extra)
+    def opt(name):  # an option given, else train_detector's default
+        return options.get(name, inspect.signature(train_detector).parameters[name].default)
+
+    t0 = time.perf_counter()
+    config = {k: v for k, v in options.items() if k in ("grid", "region")}
+    sgrid = _training_grid(samples, config, opt("fit_grid"))
+    data = detection_training_data(samples, opt("grid_negatives"), sgrid,
+                                   config.get("region", "auto"),
+                                   negatives_per_image=opt("negatives_per_image"),
+                                   random_state=random_state)
+    shared = {"data": time.perf_counter() - t0}
+    if len(np.unique(data.labels)) < 2:
+        raise ValueError("training needs positive and negative rectangles")
+    reps = {}
+    for learner in dict.fromkeys(m["learner"] for m in models):
+        t1 = time.perf_counter()
+        reps[learner] = fit_representation(
+            data.images, data.masks, learner, n_atoms=opt("n_atoms"), whiten=opt("whiten"),
+            n_patches=opt("n_patches"), extra=opt("extra_patches"), random_state=random_state)
+        shared[learner] = time.perf_counter() - t1
+    out = []
+    for m in models:
+        model = train_detector(samples, **m, **options, random_state=random_state, data=data,
+                               representation=reps[m["learner"]])
+        extra_s = shared["data"] + shared[m["learner"]]
+        model.config["train_seconds"] += extra_s
+        model.config["shared_train_seconds"] = extra_s
+        model.config["training_data_seconds"] = shared["data"]
+        out.append(model)
+    return out
 
 
 def _check_physical_options(samples, weight, bins) -> None:

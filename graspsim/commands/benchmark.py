@@ -1,4 +1,4 @@
-"""``graspsim benchmark recognition|detection``: the paper's offline benchmarks."""
+"""``graspsim benchmark recognition|detection|table2``: the paper's offline benchmarks."""
 
 from __future__ import annotations
 
@@ -42,11 +42,12 @@ def register(subparsers) -> None:
                    help="keep a seeded random subset of this many rectangles")
     r.add_argument("--figure5", action="store_true",
                    help="also plot accuracy against dictionary size (50..400), +- whitening")
-    r.add_argument("--jobs", type=int, default=1)
     r.add_argument("--seed", type=int, default=0)
+    add_executor_args(r)
     r.add_argument("--out", required=True, help="output folder (resumes if it has results)")
     r.set_defaults(func=_recognition)
     _register_detection(sub)
+    _register_table2(sub)
 
 
 def _recognition(args: argparse.Namespace) -> int:
@@ -58,7 +59,8 @@ def _recognition(args: argparse.Namespace) -> int:
         n_patches=args.patches, split=args.split, n_folds=args.folds,
         inner_folds=args.inner_folds, paper_grid=args.paper_grid, whiten=not args.no_whiten,
         extra_patches=args.extra_patches, max_rectangles=args.max_rectangles,
-        figure5=args.figure5, n_jobs=args.jobs, seed=args.seed, out=args.out,
+        figure5=args.figure5, seed=args.seed, out=args.out,
+        executor=executor_from_args(args),
     )
     extra = (f", figure5.md and figure5.png ({len(summary['figure5'])} points)"
              if "figure5" in summary else "")
@@ -72,28 +74,11 @@ def _register_detection(sub) -> None:
         "detection",
         help="cross-validated grasp detection by the rectangle metric (Table 2)",
     )
-    d.add_argument("--data", required=True, help="dataset root folder")
-    d.add_argument("--format", choices=["cornell", "jacquard"], required=True)
-    d.add_argument("--scale", type=float, default=None,
-                   help="resize images and rectangles (default 1 for Cornell, 0.5 for Jacquard)")
-    d.add_argument("--mapping", default=None,
-                   help="Cornell image-to-object mapping file (for --split object)")
+    _add_dataset_args(d)
     d.add_argument("--model", default=None, metavar="PATH",
                    help="evaluate this saved model (PATH.npz + PATH.json, e.g. from "
                         "--save-model) on every labelled image of --data, without training "
                         "(cross-dataset evaluation)")
-    d.add_argument("--extra-patches", default=None, metavar="FILE",
-                   help="npz of unlabelled patches (graspsim patches) joined to each fold's "
-                        "dictionary learning only (self-taught); the SVM's training is unchanged")
-    d.add_argument("--extra-train", default=None, metavar="DATA",
-                   help="a further labelled dataset joined to every training fold, never to a "
-                        "test fold (e.g. synthetic images beside real ones)")
-    d.add_argument("--extra-format", choices=["cornell", "jacquard"], default=None,
-                   help="format of --extra-train (default: --format)")
-    d.add_argument("--extra-scale", type=float, default=None,
-                   help="resize --extra-train (default 1 for Cornell, 0.5 for Jacquard)")
-    d.add_argument("--extra-mapping", default=None,
-                   help="Cornell image-to-object mapping file of --extra-train")
     d.add_argument("--split", choices=["image", "object"], default="object")
     d.add_argument("--learner", default=None,
                    help="one of SC OMP GSVQ NKM RP R (default NKM, or the --model's)")
@@ -104,8 +89,6 @@ def _register_detection(sub) -> None:
                         "middle of the reference grid)")
     d.add_argument("--C", type=float, default=None, help="SVM cost (default: from "
                    "--recognition, else 1)")
-    d.add_argument("--recognition", default=None, metavar="JSON",
-                   help="recognition.json: take the most often chosen encoder parameter and C")
     add_detector_arguments(d, kinds=("dense", "exact", "lattice", "ggcnn", "grconvnet"))
     d.add_argument("--ggcnn-steps", type=int, default=20_000, metavar="N",
                    help="--detector ggcnn or grconvnet (the CNN peer trained per fold; needs "
@@ -121,6 +104,42 @@ def _register_detection(sub) -> None:
                    help="GG-CNN, GR-ConvNet: also run DLSR's benchmark (the DLSR options given "
                         "here, the preset's detector) on the same folds into OUT/dlsr and test "
                         "the two image by image (exact McNemar)")
+    _add_training_args(d)
+    d.add_argument("--save-model", default=None, metavar="PATH",
+                   help="also train on every image and save the model (PATH.npz + PATH.json)")
+    d.add_argument("--seed", type=int, default=0)
+    add_executor_args(d)
+    d.add_argument("--out", required=True, help="output folder (resumes if it has results)")
+    d.set_defaults(func=_detection)
+
+
+def _add_dataset_args(d) -> None:
+    """The dataset and the extra training data of ``detection`` and ``table2``."""
+    d.add_argument("--data", required=True, help="dataset root folder")
+    d.add_argument("--format", choices=["cornell", "jacquard"], required=True)
+    d.add_argument("--scale", type=float, default=None,
+                   help="resize images and rectangles (default 1 for Cornell, 0.5 for Jacquard)")
+    d.add_argument("--mapping", default=None,
+                   help="Cornell image-to-object mapping file (for --split object)")
+    d.add_argument("--extra-patches", default=None, metavar="FILE",
+                   help="npz of unlabelled patches (graspsim patches) joined to each fold's "
+                        "dictionary learning only (self-taught); the SVM's training is unchanged")
+    d.add_argument("--extra-train", default=None, metavar="DATA",
+                   help="a further labelled dataset joined to every training fold, never to a "
+                        "test fold (e.g. synthetic images beside real ones)")
+    d.add_argument("--extra-format", choices=["cornell", "jacquard"], default=None,
+                   help="format of --extra-train (default: --format)")
+    d.add_argument("--extra-scale", type=float, default=None,
+                   help="resize --extra-train (default 1 for Cornell, 0.5 for Jacquard)")
+    d.add_argument("--extra-mapping", default=None,
+                   help="Cornell image-to-object mapping file of --extra-train")
+
+
+def _add_training_args(d) -> None:
+    """The training and search options of ``detection`` and ``table2`` (the rows' shared
+    ones)."""
+    d.add_argument("--recognition", default=None, metavar="JSON",
+                   help="recognition.json: take the most often chosen encoder parameter and C")
     d.add_argument("--coarse-to-fine", action="store_true",
                    help="dense detector: coarse grid first, then the full grid near the best")
     d.add_argument("--rescore", type=int, default=300,
@@ -147,12 +166,82 @@ def _register_detection(sub) -> None:
     d.add_argument("--patches", type=int, default=100_000)
     d.add_argument("--max-images", type=int, default=None)
     d.add_argument("--overlays", type=int, default=4, help="best and worst overlays to write")
-    d.add_argument("--save-model", default=None, metavar="PATH",
-                   help="also train on every image and save the model (PATH.npz + PATH.json)")
-    d.add_argument("--seed", type=int, default=0)
-    add_executor_args(d)
-    d.add_argument("--out", required=True, help="output folder (resumes if it has results)")
-    d.set_defaults(func=_detection)
+
+
+def _split_list(text: str) -> list[str]:
+    """``--split image,object``: the splits, in order."""
+    splits = [t.strip() for t in text.split(",") if t.strip()]
+    bad = [t for t in splits if t not in ("image", "object")]
+    if bad or not splits:
+        raise argparse.ArgumentTypeError(f"splits are image and/or object, got {text!r}")
+    return splits
+
+
+def _row_list(text: str) -> list[tuple[str, str]]:
+    """``--rows NKM-Natural,NKM-SC``: (learner, encoder) pairs."""
+    from dlsr.features import ENCODERS, LEARNERS
+
+    rows = []
+    for item in (t.strip() for t in text.split(",") if t.strip()):
+        learner, _, encoder = item.partition("-")
+        if learner not in LEARNERS or encoder not in ENCODERS:
+            raise argparse.ArgumentTypeError(
+                f"a row is LEARNER-ENCODER ({'/'.join(LEARNERS)} - {'/'.join(ENCODERS)}), "
+                f"got {item!r}")
+        rows.append((learner, encoder))
+    if not rows:
+        raise argparse.ArgumentTypeError("no row given")
+    return rows
+
+
+def _register_table2(sub) -> None:
+    t = sub.add_parser(
+        "table2",
+        help="every row of Table 2 on both splits in one pass (shared training sets, "
+             "dictionary and test-image work; the same records as one detection run per row)",
+    )
+    _add_dataset_args(t)
+    t.add_argument("--split", type=_split_list, default=["image", "object"],
+                   metavar="image,object", help="the splits (default: both)")
+    t.add_argument("--rows", type=_row_list,
+                   default=[("NKM", "Natural"), ("NKM", "SC"), ("OMP", "Natural"),
+                            ("RP", "Natural")], metavar="L-E,...",
+                   help="learner-encoder rows (default: the paper's Table 2 rows "
+                        "NKM-Natural,NKM-SC,OMP-Natural,RP-Natural)")
+    add_detector_arguments(t, kinds=("dense", "exact", "lattice"))
+    _add_training_args(t)
+    t.add_argument("--seed", type=int, default=0)
+    add_executor_args(t)
+    t.add_argument("--out", required=True,
+                   help="output folder: one folder per row and split (LEARNER-ENCODER_SPLIT, "
+                        "as graspsim benchmark detection writes it), table2.json and "
+                        "table2.md; resumes if it has results")
+    t.set_defaults(func=_table2)
+
+
+def _table2(args: argparse.Namespace) -> int:
+    from graspsim.detectors.dlsr_options import options_from_args
+    from graspsim.eval.offline.table2_pass import table2_benchmark
+
+    table = table2_benchmark(
+        args.data, args.format, args.out, splits=args.split, rows=args.rows,
+        scale=args.scale, mapping=args.mapping, extra_train=args.extra_train,
+        extra_format=args.extra_format, extra_scale=args.extra_scale,
+        extra_mapping=args.extra_mapping, n_overlays=args.overlays,
+        executor=executor_from_args(args), options=options_from_args(args),
+        recognition_json=args.recognition, n_folds=args.folds, n_atoms=args.atoms,
+        n_patches=args.patches, grid_negatives=args.grid_negatives, fit_grid=args.fit_grid,
+        hard_negatives=args.hard_negatives, hard_rounds=args.hard_rounds, region=args.region,
+        rescore=args.rescore, coarse_to_fine=args.coarse_to_fine, max_images=args.max_images,
+        extra_patches=args.extra_patches, seed=args.seed)
+    for split, cells in table["splits"].items():
+        print(f"{split}-wise: " + ", ".join(
+            f"{name} {100 * c['accuracy']:.2f} %" for name, c in cells["rows"].items())
+            + "; baselines " + ", ".join(f"{k} {100 * v:.2f} %"
+                                         for k, v in cells["baselines"].items()))
+    print(f"wrote {args.out}/table2.json and table2.md "
+          f"({table['seconds_this_run']:.0f} s this run)")
+    return 0
 
 
 def _ggcnn(args: argparse.Namespace) -> int:

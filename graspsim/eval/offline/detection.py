@@ -4,16 +4,14 @@ images and paired tests against them.
 
 :func:`detection_benchmark` runs in named steps: the saved model checked (with ``model``), the
 extra training images, the labelled images, the folds, the configuration (whose digest keys
-the results), the missing fold models trained, the missing test images detected (each fold's
-detector: :func:`_fold_detector`), the summary (:func:`summarize_detection`), the overlays,
-and the model on every image (``save_model``).
+the results) -- these five are :func:`~graspsim.eval.offline.detection_plan.plan_detection` --,
+the missing fold models trained, the missing test images detected (each fold's detector:
+:meth:`~graspsim.eval.offline.detection_plan.DetectionPlan.fold_detector`), the summary
+(:func:`summarize_detection`), the overlays, and the model on every image (``save_model``).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-import hashlib
 import json
 import logging
 import platform
@@ -24,31 +22,20 @@ import numpy as np
 from PIL import Image
 from tqdm.auto import tqdm
 
-from dlsr import datasets
-from dlsr.detection import (
-    DETECTOR_KINDS,
-    DLSRDetector,
-    check_training_options,
-    sample_observation,
-    train_detector,
-)
-from dlsr.features import ENCODERS, LEARNERS
+from dlsr.detection import detect_many, sample_observation, train_detector
 from dlsr.metrics import jaccard_matrix, rectangle_metric
-from dlsr.patches import load_patch_file
-from dlsr.records import read_jsonl, write_text_atomic
+from dlsr.records import write_text_atomic
 from dlsr.rectangles import as_rect_array
 from dlsr.viz import draw_rectangles
 
-from ...data.samples import load_samples
 from ...detectors.baselines import MaskPCADetector, ObjectRandomDetector
-from ...detectors.dlsr_options import build_real_detector
 from ...runtime.executor import Executor
-from ...sim.gripper import MAX_OPENING
 from ..stats import paired_accuracy_test
-from .recognition import recognition_choice
+from .detection_plan import DetectionPlan, plan_detection
 from .table2 import table2_markdown
 
-__all__ = ["TRAINING_KEYS", "detection_benchmark", "summarize_detection", "train_saved"]
+__all__ = ["benchmark_baselines", "detect_image", "detection_benchmark", "finish_detection",
+           "summarize_detection", "train_saved"]
 
 log = logging.getLogger(__name__)
 
@@ -77,31 +64,55 @@ def train_saved(path, samples, options: dict) -> list[str]:
 
 def _detect_one(det, s, baselines, seed, base: dict) -> dict:
     """Detect on one labelled image and score it and the baselines by the rectangle metric."""
+    return detect_image([det], s, baselines, seed, [base])[0]
+
+
+def detect_image(detectors, s, baselines: dict, seed: int, bases: list[dict]) -> list[dict]:
+    """One labelled image's results for several detectors (a task for the executor's
+    workers): each detector's top rectangle scored by the rectangle metric against the
+    image's positives, beside the baselines' (run once for all).
+
+    The detectors detect through :func:`dlsr.detection.detect_many`, so lattice detectors
+    that differ only in their model share their candidates and rectangle images; each
+    result is the one the detector gives alone.
+
+    Parameters
+    ----------
+    detectors : sequence of objects with ``detect(obs)``
+    s : dlsr.datasets.GraspSample
+    baselines : dict
+        Name to detector with ``predict(obs)`` (:func:`benchmark_baselines`).
+    seed : int
+        The baselines' seed on this image.
+    bases : list of dict
+        Per detector, the fields its result starts from (``config_key``, ``fold``).
+
+    Returns
+    -------
+    list of dict
+        One ``results.jsonl`` record per detector.
+    """
     obs = sample_observation(s)
-    d = det.detect(obs)
-    rec_ = {**base, "image_id": s.image_id, "object_id": s.object_id, "seconds": d.seconds,
-            "n_candidates": d.n_candidates, "n_encodings": d.n_encodings, "reason": d.reason}
-    if len(d.rects):
-        top = d.rects[0]
-        rec_.update(rect=top.tolist(), score=float(d.scores[0]),
-                    success=rectangle_metric(top, s.positives),
-                    jaccard=float(jaccard_matrix(top, s.positives).max()))
-    else:
-        rec_.update(rect=None, score=None, success=False, jaccard=0.0)
-    rec_["baselines"] = {}
+    found = detect_many(detectors, obs)
+    outcomes = {}
     for name, b in baselines.items():
         rects = b.predict(dict(obs, seed=seed))
-        rec_["baselines"][name] = bool(rects) and rectangle_metric(rects[0], s.positives)
-    return rec_
-
-
-def _file_digest(*paths) -> str:
-    h = hashlib.sha1()
-    for p in paths:
-        with open(p, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
-    return h.hexdigest()[:12]
+        outcomes[name] = bool(rects) and rectangle_metric(rects[0], s.positives)
+    out = []
+    for d, base in zip(found, bases, strict=True):
+        rec_ = {**base, "image_id": s.image_id, "object_id": s.object_id,
+                "seconds": d.seconds, "n_candidates": d.n_candidates,
+                "n_encodings": d.n_encodings, "reason": d.reason}
+        if len(d.rects):
+            top = d.rects[0]
+            rec_.update(rect=top.tolist(), score=float(d.scores[0]),
+                        success=rectangle_metric(top, s.positives),
+                        jaccard=float(jaccard_matrix(top, s.positives).max()))
+        else:
+            rec_.update(rect=None, score=None, success=False, jaccard=0.0)
+        rec_["baselines"] = dict(outcomes)
+        out.append(rec_)
+    return out
 
 
 def detection_benchmark(
@@ -181,254 +192,84 @@ def detection_benchmark(
     dict
         The content of ``detection.json``.
     """
-    if options is not None:
-        detector, clear_jaws = options.detector, False
-        physical = options.physical and model is None
-    if detector not in DETECTOR_KINDS:
-        raise ValueError(f"detector must be one of {DETECTOR_KINDS}, got {detector!r}")
-    fixed = None
-    if model is not None:
-        fixed = _saved_model(model, learner, encoder, extra_patches=extra_patches,
-                             extra_train=extra_train, save_model=save_model,
-                             recognition_json=recognition_json, fit_grid=fit_grid,
-                             hard_negatives=hard_negatives, physical=physical,
-                             encoder_param=encoder_param, C=C)
-        learner, encoder = fixed.representation.learner, fixed.encoder
-    learner = "NKM" if learner is None else learner
-    encoder = "Natural" if encoder is None else encoder
-    if learner not in LEARNERS:
-        raise ValueError(f"unknown learner {learner!r}; choose from {LEARNERS}")
-    if encoder not in ENCODERS:
-        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
-    check_training_options(fit_grid, hard_negatives, hard_rounds, physical)
-    extra = None if extra_patches is None else load_patch_file(extra_patches)
-    extra_format = format if extra_format is None else extra_format
-    extra_samples = _extra_training(extra_train, extra_format, extra_scale, extra_mapping)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    samples = _labelled_samples(data, format, scale, mapping, images, max_images)
-    split, n_folds, folds = _benchmark_folds(samples, data, model, split, n_folds, seed)
-    if recognition_json is not None:
-        p, c = recognition_choice(recognition_json, learner, encoder)
-        encoder_param = p if encoder_param is None else encoder_param
-        C = c if C is None else C
-    C = 1.0 if C is None else float(C)
-    training = dict(learner=learner, encoder=encoder, encoder_param=encoder_param, C=C,
-                    n_atoms=n_atoms, n_patches=n_patches, grid_negatives=grid_negatives,
-                    fit_grid=fit_grid, hard_negatives=hard_negatives, hard_rounds=hard_rounds,
-                    extra_patches=extra, physical=physical, region=region)
-    config = _benchmark_config(
-        data=data, format=format, scale=scale, split=split, n_folds=n_folds, model=model,
-        fixed=fixed, training=training, detector=detector, rescore=rescore,
-        coarse_to_fine=coarse_to_fine, n_images=len(samples), seed=seed, clear_jaws=clear_jaws,
-        options=options, train_positives=train_positives, images=images,
+    plan = plan_detection(
+        data, format, out, scale=scale, mapping=mapping, split=split, learner=learner,
+        encoder=encoder, encoder_param=encoder_param, C=C, recognition_json=recognition_json,
+        detector=detector, n_folds=n_folds, n_atoms=n_atoms, n_patches=n_patches,
+        grid_negatives=grid_negatives, fit_grid=fit_grid, hard_negatives=hard_negatives,
+        hard_rounds=hard_rounds, region=region, rescore=rescore, clear_jaws=clear_jaws,
+        coarse_to_fine=coarse_to_fine, max_images=max_images, save_model=save_model,
         extra_patches=extra_patches, extra_train=extra_train, extra_format=extra_format,
-        extra_scale=extra_scale, n_extra=len(extra_samples))
-    key = _digest(config)
-    models = out / "models" / _digest({k: config[k] for k in TRAINING_KEYS if k in config})
-    results_path = out / "results.jsonl"
-    done = {r["image_id"]: r
-            for r in read_jsonl(results_path, required=("image_id",), repair=True)
-            if r.get("config_key") == key}
-    baselines = {"random": ObjectRandomDetector(region=region), "mask-pca": MaskPCADetector()}
+        extra_scale=extra_scale, extra_mapping=extra_mapping, model=model, physical=physical,
+        seed=seed, options=options, images=images, train_positives=train_positives)
     executor = Executor("sequential", progress=False) if executor is None else executor
     t_run = time.perf_counter()
     if model is None:
-        _train_fold_models(models, samples, folds, done, extra_samples, training,
-                           train_positives, seed, executor)
-
-    fold_detector = functools.partial(
-        _fold_detector, fixed=fixed, models=models, options=options, detector=detector,
-        region=region, rescore=rescore, coarse_to_fine=coarse_to_fine, clear_jaws=clear_jaws)
-    _detect_folds(samples, folds, done, fold_detector, baselines, key, seed, results_path,
-                  executor, progress)
-    recs = [done[s.image_id] for s in samples]
-    summary = summarize_detection(recs, samples, folds, list(baselines), config)
-    summary["seconds_this_run"] = time.perf_counter() - t_run
-    write_text_atomic(out / "detection.json", json.dumps(summary, indent=2))
-    write_text_atomic(out / "table2.md", table2_markdown(summary))
-    _write_overlays(out / "overlays", samples, recs, n_overlays)
+        _train_fold_models(plan, executor)
+    _detect_folds(plan, executor, progress)
+    summary = finish_detection(plan, time.perf_counter() - t_run, n_overlays)
     if save_model is not None:
-        full = train_detector(samples + extra_samples, **training, random_state=seed,
-                              detector=detector, rescore=rescore)
+        cfg = plan.config
+        full = train_detector(plan.samples + plan.extra_samples, **plan.training,
+                              random_state=seed, detector=cfg["detector"],
+                              rescore=cfg["rescore"])
         full.save(save_model)
         summary["model"] = str(save_model)
     return summary
 
 
-#: The configuration keys a fold's model depends on (models are shared by detector options).
-TRAINING_KEYS = ("data", "format", "scale", "split", "learner", "encoder", "encoder_param", "C",
-                 "n_folds", "n_atoms", "n_patches", "grid_negatives", "fit_grid", "region",
-                 "n_images", "seed", "hard_negatives", "hard_rounds", "extra_patches",
-                 "extra_train", "physical", "images", "train_positives")
+def benchmark_baselines(region: str = "auto") -> dict:
+    """The baselines a detection benchmark scores on every image: ``random`` (a rectangle on
+    the object ``region``) and ``mask-pca``."""
+    return {"random": ObjectRandomDetector(region=region), "mask-pca": MaskPCADetector()}
 
 
-def _digest(config: dict) -> str:
-    return hashlib.sha1(json.dumps(config, sort_keys=True).encode()).hexdigest()[:12]
+def finish_detection(plan: DetectionPlan, seconds: float, n_overlays: int = 4) -> dict:
+    """Steps 8 and 9 of :func:`detection_benchmark`, once every image of ``plan`` is in
+    ``plan.done``: ``detection.json`` (with ``seconds_this_run``), ``table2.md`` and the
+    overlays written.
+
+    Returns
+    -------
+    dict
+        The content of ``detection.json``.
+    """
+    recs = [plan.done[s.image_id] for s in plan.samples]
+    baselines = list(benchmark_baselines())
+    summary = summarize_detection(recs, plan.samples, plan.folds, baselines, plan.config)
+    summary["seconds_this_run"] = seconds
+    write_text_atomic(plan.out / "detection.json", json.dumps(summary, indent=2))
+    write_text_atomic(plan.out / "table2.md", table2_markdown(summary))
+    _write_overlays(plan.out / "overlays", plan.samples, recs, n_overlays)
+    return summary
 
 
-def _saved_model(model, learner, encoder, **not_with_a_model):
-    """Step 1 with ``model``: the saved detector, checked against the arguments a saved model
-    cannot take (``not_with_a_model``, their defaults None, or 0 and False) and against the
-    learner and encoder given."""
-    defaults = {"hard_negatives": 0, "physical": False}
-    refused = [name for name, value in not_with_a_model.items()
-               if value != defaults.get(name)]
-    if refused:
-        raise ValueError(f"a saved model is evaluated without training: "
-                         f"{', '.join(refused)} cannot be used with it")
-    fixed = DLSRDetector.load(model)  # FileNotFoundError / ValueError naming the file
-    for name, given, has in (("learner", learner, fixed.representation.learner),
-                             ("encoder", encoder, fixed.encoder)):
-        if given is not None and given != has:
-            raise ValueError(f"{name} {given!r} given, but the model {model} has {has!r}")
-    return fixed
-
-
-def _extra_training(extra_train, extra_format, extra_scale, extra_mapping) -> list:
-    """Step 2: the labelled images of the extra training data (none without it)."""
-    if extra_train is None:
-        return []
-    extra = [s for s in load_samples(extra_train, extra_format, extra_scale, extra_mapping)
-             if s.positives]
-    if not extra:
-        raise ValueError(f"no labelled images in the extra training data {extra_train}")
-    return extra
-
-
-def _labelled_samples(data, format, scale, mapping, images, max_images) -> list:
-    """Step 3: the dataset's labelled images, only ``images`` when given, the first
-    ``max_images``."""
-    samples = [s for s in load_samples(data, format, scale, mapping) if s.positives]
-    if images is not None:
-        wanted = {str(i) for i in images}
-        missing = wanted - {s.image_id for s in samples}
-        if missing:
-            raise ValueError(f"images not among the labelled images of {data}: "
-                             f"{sorted(missing)[:5]}")
-        samples = [s for s in samples if s.image_id in wanted]
-    if max_images is not None:
-        samples = samples[:max_images]
-    return samples
-
-
-def _benchmark_folds(samples, data, model, split, n_folds, seed):
-    """Step 4: ``(split, n_folds, folds)``, one fold of every image for a saved model."""
-    if model is not None:
-        if not samples:
-            raise ValueError(f"no labelled images in {data}")
-        return "model", 1, [(None, list(range(len(samples))))]
-    if len(samples) < n_folds:
-        raise ValueError(f"{len(samples)} labelled images cannot make {n_folds} folds")
-    if split == "object":
-        return split, n_folds, datasets.object_wise_folds(samples, n_folds, seed)
-    if split == "image":
-        return split, n_folds, datasets.image_wise_folds(samples, n_folds, seed)
-    raise ValueError(f"split must be 'image' or 'object', got {split!r}")
-
-
-def _benchmark_config(*, data, format, scale, split, n_folds, model, fixed, training, detector,
-                      rescore, coarse_to_fine, n_images, seed, clear_jaws, options,
-                      train_positives, images, extra_patches, extra_train, extra_format,
-                      extra_scale, n_extra) -> dict:
-    """Step 5: what ``detection.json`` records as the run's configuration; its digest keys the
-    per-image results (a rerun of the same configuration resumes)."""
-    t = training
-    if model is not None:
-        model_npz, model_json = DLSRDetector._paths(model)
-        config = {
-            "data": str(data), "format": format, "scale": scale, "split": split,
-            "model": str(model), "model_digest": _file_digest(model_json, model_npz),
-            "learner": t["learner"], "encoder": t["encoder"],
-            "encoder_param": fixed.encoder_param, "detector": detector, "n_folds": 1,
-            "region": t["region"], "rescore": rescore, "coarse_to_fine": coarse_to_fine,
-            "n_images": n_images, "seed": seed,
-            "model_config": {k: v for k, v in fixed.config.items() if k != "grid"},
-        }
-    else:
-        config = {
-            "data": str(data), "format": format, "scale": scale, "split": split,
-            "learner": t["learner"], "encoder": t["encoder"],
-            "encoder_param": t["encoder_param"], "C": t["C"], "detector": detector,
-            "n_folds": n_folds, "n_atoms": t["n_atoms"], "n_patches": t["n_patches"],
-            "grid_negatives": float(t["grid_negatives"]),
-            "fit_grid": None if t["fit_grid"] is None else float(t["fit_grid"]),
-            "region": t["region"], "rescore": rescore, "coarse_to_fine": coarse_to_fine,
-            "n_images": n_images, "seed": seed,
-        }
-    # options added later enter the keys only when used: earlier runs' results still match
-    if clear_jaws:
-        config["clear_jaws"] = True
-    if t["physical"]:
-        config["physical"] = True
-    if options is not None:
-        config["options"] = dataclasses.asdict(options)
-    if train_positives is not None:
-        config["train_positives"] = int(train_positives)
-    if images is not None:
-        config["images"] = hashlib.sha1(" ".join(sorted(str(i) for i in images))
-                                        .encode()).hexdigest()[:12]
-    if t["hard_negatives"]:
-        config["hard_negatives"] = int(t["hard_negatives"])
-        if t["hard_rounds"] != 1:
-            config["hard_rounds"] = int(t["hard_rounds"])
-    if t["extra_patches"] is not None:
-        config["extra_patches"] = {"path": str(extra_patches),
-                                   "n": int(len(t["extra_patches"][0])),
-                                   "digest": _file_digest(extra_patches)}
-    if n_extra:
-        config["extra_train"] = {"data": str(extra_train), "format": extra_format,
-                                 "scale": extra_scale, "n_images": n_extra}
-    return config
-
-
-def _fold_model_path(models: Path, k: int) -> Path:
-    return models.with_name(f"{models.name}_fold{k}")
-
-
-def _train_fold_models(models, samples, folds, done, extra_samples, training, train_positives,
-                       seed, executor) -> None:
+def _train_fold_models(plan: DetectionPlan, executor) -> None:
     """Step 6: the folds' models that are missing and still needed, side by side on the
     executor's workers (each fold is trained from its own seed, so where it runs changes
     nothing)."""
-    to_train = [k for k, (_, test) in enumerate(folds)
-                if any(samples[i].image_id not in done for i in test)
-                and not _fold_model_path(models, k).with_name(
-                    f"{models.name}_fold{k}.json").is_file()]
-    tasks = [(_fold_model_path(models, k),
-              _fewer_positives([samples[i] for i in folds[k][0]], train_positives, seed + k)
-              + extra_samples, {**training, "random_state": seed + k})
-             for k in to_train]
+    tasks = [(plan.fold_model_path(k), plan.fold_training_samples(k),
+              {**plan.training, "random_state": plan.seed + k})
+             for k in plan.folds_to_train()]
     for _ in executor.imap(train_saved, tasks, desc="fold models", star=True):
         pass
 
 
-def _fold_detector(k: int, *, fixed, models, options, detector, region, rescore,
-                   coarse_to_fine, clear_jaws):
-    """Fold ``k``'s detector: the saved model (``fixed``) or the fold's, searched as
-    ``options`` say (:func:`graspsim.detectors.dlsr_options.build_real_detector`) or as the
-    benchmark's own arguments say."""
-    fold_model = fixed if fixed is not None else DLSRDetector.load(_fold_model_path(models, k))
-    if options is not None:
-        return build_real_detector(fold_model, options, region=region, rescore=rescore,
-                                   coarse_to_fine=coarse_to_fine)
-    return _benchmark_detector(fold_model, detector, region, rescore, coarse_to_fine, clear_jaws)
-
-
-def _detect_folds(samples, folds, done, fold_detector, baselines, key, seed, results_path,
-                  executor, progress) -> None:
+def _detect_folds(plan: DetectionPlan, executor, progress) -> None:
     """Step 7: each fold's missing test images detected with its model, appended to
-    ``results.jsonl`` as they arrive and put in ``done``."""
+    ``results.jsonl`` as they arrive and put in ``plan.done``."""
+    samples, done = plan.samples, plan.done
+    baselines = benchmark_baselines(plan.training["region"])
     bar = tqdm(total=len(samples), initial=len(done), desc="detection", disable=not progress)
-    for k, (_, test) in enumerate(folds):
+    for k, (_, test) in enumerate(plan.folds):
         todo = [i for i in test if samples[i].image_id not in done]
         if not todo:
             continue
-        det = fold_detector(k)
-        tasks = [(det, samples[i], baselines, seed + i, {"config_key": key, "fold": k})
-                 for i in todo]
+        det = plan.fold_detector(k)
+        tasks = [(det, samples[i], baselines, plan.seed + i,
+                  {"config_key": plan.key, "fold": k}) for i in todo]
         for rec_ in executor.imap(_detect_one, tasks, desc=f"fold {k}", star=True):
-            with results_path.open("a") as fh:
+            with plan.results_path.open("a") as fh:
                 fh.write(json.dumps(rec_) + "\n")
             done[rec_["image_id"]] = rec_
             bar.update(1)
@@ -505,37 +346,3 @@ def _write_overlays(folder: Path, samples, recs, n_overlays: int) -> None:
         img = draw_rectangles(s.rgb, rects, negatives=s.positives)
         name = "".join(ch if ch.isalnum() or ch in "._-" else "_" for ch in str(s.image_id))
         Image.fromarray(img).save(folder / f"{tag}_{name}.png")
-
-def _fewer_positives(samples, n: int | None, seed: int):
-    """``samples`` with at most ``n`` of their positives each (a seeded random subset, in
-    their order); ``samples`` itself when ``n`` is None."""
-    if n is None:
-        return samples
-    if n < 1:
-        raise ValueError(f"train_positives must be >= 1, got {n}")
-    rng = np.random.default_rng(seed)
-    out = []
-    for s in samples:
-        keep = np.sort(rng.choice(len(s.positives), min(n, len(s.positives)), replace=False))
-        out.append(dataclasses.replace(s, positives=[s.positives[i] for i in keep]))
-    return out
-
-
-def _benchmark_detector(model, kind: str, region: str, rescore: int, coarse_to_fine: bool,
-                        clear_jaws: bool):
-    """The detector of :func:`detection_benchmark` on a (fold) model."""
-    if kind == "lattice":
-        return model.detector("lattice", region=region,
-                              max_width=MAX_OPENING if clear_jaws else None)
-    if kind == "exact":
-        det = model.detector("exact", region=region)
-    else:
-        det = model.detector("dense", region=region, rescore=rescore,
-                             **({"coarse_to_fine": True} if coarse_to_fine else {}))
-    if clear_jaws:
-        det.grid = dataclasses.replace(det.grid, clear_jaws=True)
-    return det
-
-
-# ---------------------------------------------------------------------------------------------
-# Self-taught learning in detection (the paper's Table 3)

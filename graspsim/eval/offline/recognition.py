@@ -5,6 +5,7 @@ nested cross-validation of every learner and encoder on a Cornell or Jacquard fo
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 from collections import Counter
@@ -25,9 +26,14 @@ def recognition_benchmark(
     data, format: str, out, scale=None, mapping=None, learners=None, encoders=None,
     n_atoms=300, n_patches=100_000, split="image", n_folds=5, inner_folds=5,
     paper_grid=False, whiten=True, extra_patches=None, max_rectangles=None, figure5=False,
-    n_jobs=1, seed=0, progress=True,
+    n_jobs=1, seed=0, progress=True, executor=None,
 ) -> dict:
-    """Load ``data`` and run :func:`dlsr.recognition.run_recognition_benchmark`."""
+    """Load ``data`` and run :func:`dlsr.recognition.run_recognition_benchmark`.
+
+    With ``executor`` (a :class:`graspsim.runtime.executor.Executor`: local processes or a
+    Ray cluster), its (learner, outer fold) tasks run where and on as many workers as the
+    executor says (``n_jobs`` is then ignored); the results do not depend on it.
+    """
     extra = None
     if extra_patches is not None:  # first: a bad file is reported before any long work
 
@@ -40,13 +46,18 @@ def recognition_benchmark(
     # the rectangle images are all the benchmark reads: the whole images (2.5 MB each, 2.2 GB
     # at Cornell's 885) are not held through the hours of the table
     del samples
-    return rec.run_recognition_benchmark(
+    run = functools.partial(
+        rec.run_recognition_benchmark,
         rd, out, learners=learners or LEARNERS, encoders=encoders or ENCODERS, split=split,
         n_folds=n_folds, inner_folds=inner_folds,
         C_grid=rec.PAPER_C_GRID if paper_grid else rec.C_GRID, n_atoms=n_atoms, whiten=whiten,
-        n_patches=n_patches, extra=extra, random_state=seed, n_jobs=n_jobs, progress=progress,
+        n_patches=n_patches, extra=extra, random_state=seed, progress=progress,
         figure5_sizes=(50, 100, 200, 300, 400) if figure5 else None,
     )
+    if executor is None:
+        return run(n_jobs=n_jobs)
+    with executor.activate():  # the executor's backend and workers (n_jobs=None defers)
+        return run(n_jobs=None)
 
 
 def recognition_choice(path, learner: str, encoder: str):

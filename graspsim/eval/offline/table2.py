@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ...data.samples import DEFAULT_SCALE
 
-__all__ = ["PAPER_TABLE2", "table2_markdown"]
+__all__ = ["PAPER_TABLE2", "table2_markdown", "table2_rows_markdown"]
 
 #: Table 2 of the paper (detection accuracy %, Cornell, rectangle metric): (image-wise,
 #: object-wise); None where shared/reference/dlsr-reference-facts.md records no number.
@@ -80,4 +80,41 @@ def _cross_markdown(summary: dict) -> str:
         f"the reverse (exact McNemar test). Seconds per image: "
         f"{summary['seconds_per_image']:.2f}."
     )
+    return "\n".join(lines) + "\n"
+
+
+def table2_rows_markdown(table: dict) -> str:
+    """The paper's Table 2 beside every row of a one-pass run (``table2.json`` of
+    :func:`graspsim.eval.offline.table2_pass.table2_benchmark`) and its baselines."""
+
+    def cell(v):
+        return "—" if v is None else f"{v:.2f}"
+
+    splits = table["splits"]
+    lines = ["| method | image-wise (%) | object-wise (%) | source |", "|---|---|---|---|"]
+    for name, img, obj, src in PAPER_TABLE2:
+        lines.append(f"| {name} | {cell(img)} | {cell(obj)} | {src} (Cornell) |")
+    some = next(iter(splits.values()))
+    cfg = some["config"]
+    where = f"{cfg['format']} `{Path(cfg['data']).name}`, {some['n_images']} images"
+    names = list(dict.fromkeys(n for s in splits.values() for n in s["rows"]))
+    ours = [(f"{n} ({cfg['detector']} detector)",
+             {sp: s["rows"][n]["accuracy"] for sp, s in splits.items() if n in s["rows"]})
+            for n in names]
+    bases = list(dict.fromkeys(b for s in splits.values() for b in s["baselines"]))
+    ours += [(f"baseline: {b}", {sp: s["baselines"][b] for sp, s in splits.items()})
+             for b in bases]
+    for name, accs in ours:
+        vals = [accs.get("image"), accs.get("object")]
+        vals = [None if v is None else 100 * v for v in vals]
+        lines.append(f"| {name} | {cell(vals[0])} | {cell(vals[1])} | this run ({where}) |")
+    lines.append("")
+    lines.append(
+        f"Detection accuracy by the rectangle metric (top-1 rectangle within 30 degrees and "
+        f"Jaccard > 0.25 of some positive), {cfg['n_folds']}-fold cross-validation per split, "
+        f"every row in one pass (the training rectangles, the NKM dictionary and each test "
+        f"image's candidates shared). Paper and prior-work rows: Trottier et al. 2016, Table 2, "
+        f"on Cornell; only the cells recorded in the reference facts are shown. Each row's "
+        f"folder holds its own `detection.json` (per-image outcomes, paired tests against the "
+        f"baselines).")
     return "\n".join(lines) + "\n"

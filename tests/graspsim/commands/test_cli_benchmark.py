@@ -31,6 +31,31 @@ def test_recognition_benchmark_cli_writes_and_resumes(tmp_path, box_samples, cap
     assert (out / "results.jsonl").read_text() == before
 
 
+def test_recognition_benchmark_runs_its_tasks_on_the_executor(tmp_path, box_samples,
+                                                              monkeypatch):
+    """--backend/--jobs reach recognition_benchmark as an executor, whose joblib backend and
+    worker count the benchmark's tasks then take (n_jobs=None defers to them)."""
+    import joblib
+
+    import graspsim.eval.offline.recognition as gr
+
+    root = write_cornell(box_samples(4), tmp_path / "cornell")
+    seen = {}
+
+    def fake_run(rd, out, n_jobs, **kw):
+        backend, n = joblib.parallel.get_active_backend()
+        seen.update(n_jobs=n_jobs, backend=type(backend).__name__, workers=n)
+        return {"cells": [], "seconds_this_run": 0.0}
+
+    monkeypatch.setattr(gr.rec, "run_recognition_benchmark", fake_run)
+    assert main(["benchmark", "recognition", "--data", str(root), "--format", "cornell",
+                 "--backend", "loky", "--jobs", "2", "--out", str(tmp_path / "o")]) == 0
+    assert seen == {"n_jobs": None, "backend": "LokyBackend", "workers": 2}
+    assert main(["benchmark", "recognition", "--data", str(root), "--format", "cornell",
+                 "--out", str(tmp_path / "o")]) == 0  # one job: in this process
+    assert seen["n_jobs"] is None and seen["backend"] == "SequentialBackend"
+
+
 def test_recognition_benchmark_cli_asks_for_figure5(tmp_path, box_samples, monkeypatch, capsys):
     import dlsr.recognition
 
