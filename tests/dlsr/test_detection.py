@@ -471,6 +471,9 @@ def test_dense_patch_scores_match_the_reference_pipeline_with_masked_entries(kin
     S = DenseDetector(model, chunk_size=100)._score_maps(img, msk, _PatchScorer(model, V), stats)
     S1 = DenseDetector(model)._score_maps(img, msk, _PatchScorer(model, V, n_blocks=1), stats)
     np.testing.assert_allclose(S1, S, rtol=1e-4, atol=1e-4 * np.abs(S).max())
+    S2 = DenseDetector(model)._score_maps(img, msk, _PatchScorer(model, V, colour_only=True),
+                                          dict(stats))  # patches inside the hole: colour only
+    np.testing.assert_allclose(S2, S, rtol=1e-4, atol=1e-4 * np.abs(S).max())
     X, M = patches.extract_patches(img[None], msk[None], 6)
     X, M = X[0], M[0]
     rep = model.representation
