@@ -13,6 +13,9 @@ A canvas is an ``(H, W, 8)`` float32 image with an ``(H, W, 8)`` validity mask (
 * :func:`valid_row_spans`: the rows of each patch that hold valid entries (the rectangle
   images' padding masks whole rows), from its gathered mask or (:func:`patch_row_spans`) from
   the canvas; :func:`gather_patch_rows`: only those rows of the patches and their masks;
+* :func:`colour_only`: which patches have all their colour entries valid and no valid depth
+  entry (a canvas masks the depth channels of the pixels without depth);
+  :func:`gather_colour`: only the colour entries of those patches;
 * :func:`triangle_scores`: from ``Y1 = whitened patch + mP`` and ``Y2 = whitened patch . c_k +
   b_k`` (one product of the standardised patches with ``[P | P C^T]``), the k-means triangle
   codes ``max(mean_k z - z_k, 0)``, ``z_k = ||x - c_k||`` (:func:`dlsr.coding.kmeans_triangle`),
@@ -46,6 +49,8 @@ __all__ = [
     "valid_row_spans",
     "patch_row_spans",
     "gather_patch_rows",
+    "colour_only",
+    "gather_colour",
     "triangle_scores",
     "soft_threshold_inplace",
     "soft_threshold_into",
@@ -245,6 +250,65 @@ def gather_patch_rows(img, msk, rows, cols, mean, inv, a, b, X, M):
                     else:
                         X[t, o + ch] = 0.0
                         M[t, o + ch] = 0.0
+
+
+@njit(nogil=True, cache=True)
+def colour_only(msk, rows, cols, out):
+    """Whether each patch at ``(rows[t], cols[t])`` has every colour entry (channels 0-3)
+    valid and no valid depth entry (channels 4-7), as a pile's patches without depth have.
+
+    Parameters
+    ----------
+    msk : ndarray of shape (H, W, 8), bool
+    rows, cols : ndarray of shape (n,), int
+    out : ndarray of shape (n,), bool, written
+    """
+    for t in range(len(rows)):
+        r = rows[t]
+        c = cols[t]
+        ok = True
+        for dy in range(PATCH):
+            for dx in range(PATCH):
+                for ch in range(8):
+                    if msk[r + dy, c + dx, ch] != (ch < 4):
+                        ok = False
+                        break
+                if not ok:
+                    break
+            if not ok:
+                break
+        out[t] = ok
+
+
+@njit(nogil=True, cache=True)
+def gather_colour(img, rows, cols, mean, inv, X):
+    """The colour entries (channels 0-3 of the 36 pixels, in patch order) of the standardised
+    patches at ``(rows[t], cols[t])``: the entries ``(dy * 6 + dx) * 8 + ch``, ``ch < 4``, of
+    what :func:`gather_patches` writes (the same values), for patches whose colour entries are
+    all valid.
+
+    Parameters
+    ----------
+    img : ndarray of shape (H, W, 8)
+    rows, cols : ndarray of shape (n,), int
+    mean, inv :
+        From :func:`window_stats`.
+    X : ndarray of shape (n, 144), float32, written
+    """
+    group = GROUP_OF_CHANNEL
+    mu = np.empty(4, np.float32)
+    iv = np.empty(4, np.float32)
+    for t in range(len(rows)):
+        r = rows[t]
+        c = cols[t]
+        for ch in range(4):
+            mu[ch] = mean[r, c, group[ch]]
+            iv[ch] = inv[r, c, group[ch]]
+        for dy in range(PATCH):
+            for dx in range(PATCH):
+                o = (dy * PATCH + dx) * 4
+                for ch in range(4):
+                    X[t, o + ch] = (img[r + dy, c + dx, ch] - mu[ch]) * iv[ch]
 
 
 @njit(nogil=True, cache=True)

@@ -20,10 +20,14 @@ every scene (``identical_proposals``; ``max_score_difference``: of the scores of
 rectangles, beside ``largest_score``). ``plan_cpu_seconds``: the process's CPU seconds per plan
 (all its threads), less sensitive than wall time to other work on a shared machine.
 
+``--scene pile --objects-per-scene 5 --objects ycb:test --paper full`` times the clutter
+rounds' first observations with ``dlsr-paper`` built as ``scripts/hands_ycb.py`` builds it.
+
 Usage: python scripts/bench_plan.py [--scenes 20] [--seed 0] [--rounds 3]
        [--model results/ggcnn-curve/models/dlsr_300]
        [--ggcnn results/ggcnn-curve/models/ggcnn_300.pt] [--hand builtin]
        [--reference /tmp/base] [--detectors dlsr,dlsr-paper,mask-pca,ggcnn]
+       [--objects test] [--scene drop] [--objects-per-scene 1] [--paper run]
 """
 
 from __future__ import annotations
@@ -43,20 +47,30 @@ ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("rgb", "depth", "depth_valid", "K", "T_world_cam", "seed")
 
 
-def observations(n, seed, path):
-    """The first ``n`` test scenes' observations of ``seed``, written to ``path`` (npz)."""
+def observations(n, seed, path, objects="test", scene="drop", n_objects=1):
+    """The first ``n`` scenes' observations of ``seed``, written to ``path`` (npz): ``scene``
+    (``drop``, ``pile``, ``packed``) of ``n_objects`` of ``objects``, as the trials and the
+    clutter rounds (:mod:`graspsim.eval.declutter`, their first attempt) observe them; a scene
+    that cannot be made is passed over, as the rounds do."""
     from graspsim.labels.graspability import resolve_objects
     from graspsim.sim.bullet import Simulation
-    from graspsim.sim.observe import observation, observe_scene
+    from graspsim.sim.observe import SceneError, observation, observe_scene
 
     sim = Simulation()
     arrays = {}
     try:
-        specs = resolve_objects("test")
-        for i in range(n):
-            _, _, frame, _ = observe_scene(sim, specs, seed, i)
+        specs = resolve_objects(objects)
+        i = j = 0
+        while j < n:
+            try:
+                _, _, frame, _ = observe_scene(sim, specs, seed, i, n_objects, None, scene)
+            except SceneError:
+                i += 1
+                continue
             for k, v in observation(frame, 0).items():
-                arrays[f"{i}/{k}"] = np.asarray(v)
+                arrays[f"{j}/{k}"] = np.asarray(v)
+            i += 1
+            j += 1
     finally:
         sim.close()
     np.savez(path, **arrays)
@@ -73,8 +87,10 @@ def _load(path):
     return out
 
 
-def _detectors(names, model, ggcnn, hand):
-    """The trial stage's detectors (``graspsim run``'s defaults), by name."""
+def _detectors(names, model, ggcnn, hand, paper="run"):
+    """The trial stage's detectors (``graspsim run``'s defaults), by name; ``paper="full"``
+    builds ``dlsr-paper`` as ``scripts/hands_ycb.py`` does (the full grid, the model's saved
+    options)."""
     from dlsr.detection import DLSRDetector
     from graspsim.detectors import load_detector
     from graspsim.detectors.dlsr_options import DetectorOptions, build_real_detector
@@ -92,9 +108,12 @@ def _detectors(names, model, ggcnn, hand):
                                             rescore=config.rescore,
                                             coarse_to_fine=config.coarse_to_fine, hand=hand)
         elif name == "dlsr-paper":
-            paper = Path(model).with_name(Path(model).name.replace("dlsr", "dlsr-paper"))
-            out[name] = DLSRDetector.load(paper).detector(
-                "dense", coarse_to_fine=config.coarse_to_fine, rescore=config.rescore)
+            path = Path(model).with_name(Path(model).name.replace("dlsr", "dlsr-paper"))
+            if paper == "full":
+                out[name] = DLSRDetector.load(path).detector("dense")
+            else:
+                out[name] = DLSRDetector.load(path).detector(
+                    "dense", coarse_to_fine=config.coarse_to_fine, rescore=config.rescore)
         elif name == "ggcnn":
             try:
                 import torch  # noqa: F401
@@ -112,11 +131,11 @@ def _detectors(names, model, ggcnn, hand):
 COMPARED = ("dlsr", "dlsr-paper")
 
 
-def worker(obs_path, names, model, ggcnn, hand):
+def worker(obs_path, names, model, ggcnn, hand, paper="run"):
     """Plan every scene once with each detector: wall and process CPU seconds, and the DLSR
     detectors' proposals and scores."""
     obs = _load(obs_path)
-    dets = _detectors(names, model, ggcnn, hand)
+    dets = _detectors(names, model, ggcnn, hand, paper)
     out = {}
     for name, det in dets.items():
         det.predict(obs[-1])  # warm up (compiled kernels, model files) on a scene not timed
@@ -141,7 +160,8 @@ def _run_worker(obs_path, names, args, pythonpath=None):
     if pythonpath is not None:
         env["PYTHONPATH"] = str(pythonpath)
     cmd = [sys.executable, __file__, "--worker", str(obs_path), "--detectors", ",".join(names),
-           "--model", str(args.model), "--ggcnn", str(args.ggcnn or ""), "--hand", args.hand]
+           "--model", str(args.model), "--ggcnn", str(args.ggcnn or ""), "--hand", args.hand,
+           "--paper", args.paper]
     res = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
     if res.returncode:
         raise RuntimeError(f"worker failed ({pythonpath or 'this checkout'}): "
@@ -180,16 +200,25 @@ def main(argv=None):
     p.add_argument("--reference", default=None,
                    help="a checkout of the code before the change, timed beside this one")
     p.add_argument("--detectors", default="dlsr,dlsr-paper,mask-pca,ggcnn")
+    p.add_argument("--objects", default="test", help="object set (e.g. test, ycb:test)")
+    p.add_argument("--scene", default="drop", choices=("drop", "pile", "packed"),
+                   help="scene layout (the clutter rounds' pile or packed)")
+    p.add_argument("--objects-per-scene", type=int, default=1)
+    p.add_argument("--paper", default="run", choices=("run", "full"),
+                   help="dlsr-paper as graspsim run builds it (coarse to fine) or as "
+                        "scripts/hands_ycb.py does (the full grid)")
     p.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     names = args.detectors.split(",")
     if args.worker:
-        print(json.dumps(worker(args.worker, names, args.model, args.ggcnn or None, args.hand)))
+        print(json.dumps(worker(args.worker, names, args.model, args.ggcnn or None, args.hand,
+                                args.paper)))
         return
     load_before = list(os.getloadavg())
     with tempfile.TemporaryDirectory() as tmp:
         obs_path = Path(tmp) / "obs.npz"
-        observations(args.scenes + 1, args.seed, obs_path)
+        observations(args.scenes + 1, args.seed, obs_path, args.objects, args.scene,
+                     args.objects_per_scene)
         new, ref = [], []
         for _ in range(args.rounds):  # in turn, so that both see the same load
             # one process per detector: none finds another's table fits in the memo
@@ -200,6 +229,8 @@ def main(argv=None):
                             for k, v in _run_worker(obs_path, [name], args,
                                                     pythonpath=args.reference).items()})
     out = {"scenes": args.scenes, "seed": args.seed, "hand": args.hand,
+           "objects": args.objects, "scene": args.scene,
+           "objects_per_scene": args.objects_per_scene, "paper": args.paper,
            "cpus": len(os.sched_getaffinity(0)),
            "load_average": {"start": load_before, "end": list(os.getloadavg())},
            "plan_seconds": {}, "plan_cpu_seconds": {}}

@@ -471,6 +471,9 @@ def test_dense_patch_scores_match_the_reference_pipeline_with_masked_entries(kin
     S = DenseDetector(model, chunk_size=100)._score_maps(img, msk, _PatchScorer(model, V), stats)
     S1 = DenseDetector(model)._score_maps(img, msk, _PatchScorer(model, V, n_blocks=1), stats)
     np.testing.assert_allclose(S1, S, rtol=1e-4, atol=1e-4 * np.abs(S).max())
+    S2 = DenseDetector(model)._score_maps(img, msk, _PatchScorer(model, V, colour_only=True),
+                                          dict(stats))  # patches inside the hole: colour only
+    np.testing.assert_allclose(S2, S, rtol=1e-4, atol=1e-4 * np.abs(S).max())
     X, M = patches.extract_patches(img[None], msk[None], 6)
     X, M = X[0], M[0]
     rep = model.representation
@@ -662,3 +665,45 @@ def test_masked_patches_whitened_on_their_valid_rows_score_as_the_whole_products
         _dense.gather_patch_rows(img, msk, rows[sel], cols[sel], mean, inv, a, b, Xg, Mg)
         np.testing.assert_array_equal(Xg, X[sel, a * 48:b * 48])
         np.testing.assert_array_equal(Mg, M[sel, a * 48:b * 48])
+
+
+def test_patches_without_depth_whitened_on_their_colour_entries_score_as_the_whole_products():
+    """``colour_only``: a masked patch whose depth entries are all masked and colour entries
+    all valid (a canvas patch in a depth hole) is whitened on its 144 colour entries; it
+    scores as the whole 288 x 288 whitening and centroid products give, up to float rounding,
+    and so do the other masked patches (part of a hole, off the image, no valid entry)."""
+    from dlsr import _dense
+
+    obs = _scene()
+    model = _random_model(obs)
+    rng = np.random.default_rng(6)
+    img = rng.normal(size=(40, 36, 8)).astype(np.float32)
+    msk = np.ones(img.shape, bool)
+    msk[8:24, 6:26, 4:] = False  # a large depth hole: many patches without depth
+    msk[30:, 28:, 4:] = False  # a hole at the corner
+    msk[:, :3, :] = False  # outside the source image
+    msk[34:, :8, :] = False  # no valid entry at all
+    img *= msk
+    V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
+    colour = _PatchScorer(model, V, colour_only=True)
+    whole = _PatchScorer(model, V)
+    Hp, Wp = img.shape[0] - 5, img.shape[1] - 5
+    mean = np.empty((Hp, Wp, 4), np.float32)
+    inv = np.empty((Hp, Wp, 4), np.float32)
+    full = np.empty((Hp, Wp), bool)
+    _dense.window_stats(img, msk, 1e-4, mean, inv, full)
+    rows, cols = np.divmod(np.flatnonzero(~full.ravel()), Wp)
+    S, flops = colour.masked_scores(img, msk, rows, cols, mean, inv, full, 64)
+    ref = whole.scores(img, msk, rows, cols, mean, inv, full)
+    M = whole._masks(msk, rows, cols).reshape(len(rows), 36, 8)
+    expected = M[..., :4].all(axis=(1, 2)) & ~M[..., 4:].any(axis=(1, 2))
+    got = np.empty(len(rows), bool)
+    _dense.colour_only(msk, rows, cols, got)
+    np.testing.assert_array_equal(got, expected)
+    assert 50 < expected.sum() < len(rows) - 50
+    assert flops < whole.flops_masked * len(rows)
+    np.testing.assert_allclose(S, ref, rtol=1e-5, atol=1e-5 * np.abs(ref).max())
+    X = whole._gather(img, msk, rows, cols, mean, inv, full).reshape(len(rows), 36, 8)
+    Xc = np.empty((expected.sum(), 144), np.float32)
+    _dense.gather_colour(img, rows[expected], cols[expected], mean, inv, Xc)
+    np.testing.assert_array_equal(Xc, X[expected, :, :4].reshape(-1, 144))
