@@ -368,6 +368,34 @@ def _merge_stats(into: dict, other: dict) -> None:
         into[key] = into.get(key, 0) + val
 
 
+def window_statistics(img, msk, eps: float = _STD_EPS):
+    """The per-patch standardisation's statistics at every patch position of a canvas
+    (:func:`dlsr._dense.window_stats`).
+
+    Parameters
+    ----------
+    img : ndarray of shape (H, W, 8), float32
+    msk : ndarray of shape (H, W, 8), bool
+    eps : float
+        As :func:`dlsr.whitening.standardize_patches`.
+
+    Returns
+    -------
+    mean, inv : ndarray of shape (H - 5, W - 5, 4), float32
+        Per channel group, the mean and the inverse deviation of the patch's valid entries.
+    full : ndarray of shape (H - 5, W - 5), bool
+        Whether every entry of the patch is valid.
+    """
+    from .. import _dense
+
+    Hp, Wp = img.shape[0] - PATCH + 1, img.shape[1] - PATCH + 1
+    mean = np.empty((Hp, Wp, 4), np.float32)
+    inv = np.empty((Hp, Wp, 4), np.float32)
+    full = np.empty((Hp, Wp), bool)
+    _dense.window_stats(img, msk, eps, mean, inv, full)
+    return mean, inv, full
+
+
 def _map(pool, fn, items) -> list:
     """``[fn(x) for x in items]``, in the pool's threads when there is one."""
     if pool is None or len(items) < 2:
@@ -624,7 +652,6 @@ class DenseDetector(_Base):
         return np.zeros(0) if images is None else self._score_images(images, pool)
 
     def _exact_images(self, obs, rects, pool):
-        from .. import _dense
         from ..preprocess import rectangle_images
 
         rects = np.asarray(rects, dtype=float).reshape(-1, 5)
@@ -639,11 +666,7 @@ class DenseDetector(_Base):
         n = len(rects)
         img = np.concatenate([m[0] for m in made]).reshape(n * SIZE, SIZE, 8)
         msk = np.concatenate([m[1] for m in made]).reshape(n * SIZE, SIZE, 8)
-        Hp = n * SIZE - PATCH + 1
-        mean = np.empty((Hp, GRID, 4), np.float32)
-        inv = np.empty((Hp, GRID, 4), np.float32)
-        full = np.empty((Hp, GRID), bool)
-        _dense.window_stats(img, msk, _STD_EPS, mean, inv, full)
+        mean, inv, full = window_statistics(img, msk)
         g = np.arange(GRID)
         rows = (np.arange(n)[:, None, None] * SIZE + g[None, :, None]
                 + np.zeros(GRID, np.intp)[None, None, :]).ravel()
@@ -901,8 +924,6 @@ class DenseDetector(_Base):
         -------
         ndarray of shape (H - 5, W - 5, q), float32
         """
-        from .. import _dense
-
         Hc, Wc, _ = img.shape
         Hp, Wp = Hc - PATCH + 1, Wc - PATCH + 1
         nq = scorer.V.shape[1]
@@ -914,10 +935,7 @@ class DenseDetector(_Base):
             return S.reshape(Hp, Wp, nq)
         img = np.ascontiguousarray(img, dtype=np.float32)
         msk = np.ascontiguousarray(msk, dtype=bool)
-        mean = np.empty((Hp, Wp, 4), np.float32)
-        inv = np.empty((Hp, Wp, 4), np.float32)
-        full = np.empty((Hp, Wp), bool)
-        _dense.window_stats(img, msk, _STD_EPS, mean, inv, full)
+        mean, inv, full = window_statistics(img, msk)
         t0 = time.perf_counter()
         apart = scorer.colour_only and scorer.triangle and scorer.whiten
         if apart:  # the masked patches apart, those without depth on their colour entries

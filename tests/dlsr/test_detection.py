@@ -22,6 +22,7 @@ from dlsr.detection import (
     opening_widths,
     table_plane_mask,
 )
+from dlsr.detection.dense import window_statistics
 from dlsr.features import Representation, rectangle_features
 from dlsr.metrics import rectangle_metric, rectangle_metric_many
 from dlsr.preprocess import rectangle_images
@@ -584,8 +585,6 @@ def test_table_fits_are_memoised_by_content_and_change_no_result():
 def test_patches_with_every_entry_masked_score_as_the_all_masked_patch():
     """The scorer gives a crop's padding (every entry masked) the all-masked patch's scores
     without encoding it: what encoding each of them gives."""
-    from dlsr import _dense
-
     obs = _scene()
     model = _random_model(obs)
     rng = np.random.default_rng(4)
@@ -597,11 +596,8 @@ def test_patches_with_every_entry_masked_score_as_the_all_masked_patch():
     img *= msk
     V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
     scorer = _PatchScorer(model, V)
-    Hp, Wp = img.shape[0] - 5, img.shape[1] - 5
-    mean = np.empty((Hp, Wp, 4), np.float32)
-    inv = np.empty((Hp, Wp, 4), np.float32)
-    full = np.empty((Hp, Wp), bool)
-    _dense.window_stats(img, msk, 1e-4, mean, inv, full)
+    mean, inv, full = window_statistics(img, msk)
+    Hp, Wp = full.shape
     rows, cols = np.divmod(np.arange(Hp * Wp), Wp)
     S = scorer.scores(img, msk, rows, cols, mean, inv, full)
     bad = ~full[rows, cols]
@@ -634,11 +630,8 @@ def test_masked_patches_whitened_on_their_valid_rows_score_as_the_whole_products
     V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
     rows_scorer = _PatchScorer(model, V, by_rows=True)
     whole = _PatchScorer(model, V)
-    Hp, Wp = img.shape[0] - 5, img.shape[1] - 5
-    mean = np.empty((Hp, Wp, 4), np.float32)
-    inv = np.empty((Hp, Wp, 4), np.float32)
-    full = np.empty((Hp, Wp), bool)
-    _dense.window_stats(img, msk, 1e-4, mean, inv, full)
+    mean, inv, full = window_statistics(img, msk)
+    Hp, Wp = full.shape
     rows, cols = np.divmod(np.arange(Hp * Wp), Wp)
     S = rows_scorer.scores(img, msk, rows, cols, mean, inv, full)
     ref = whole.scores(img, msk, rows, cols, mean, inv, full)
@@ -687,11 +680,8 @@ def test_patches_without_depth_whitened_on_their_colour_entries_score_as_the_who
     V = rng.normal(size=(model.n_codes, 4)).astype(np.float32)
     colour = _PatchScorer(model, V, colour_only=True)
     whole = _PatchScorer(model, V)
-    Hp, Wp = img.shape[0] - 5, img.shape[1] - 5
-    mean = np.empty((Hp, Wp, 4), np.float32)
-    inv = np.empty((Hp, Wp, 4), np.float32)
-    full = np.empty((Hp, Wp), bool)
-    _dense.window_stats(img, msk, 1e-4, mean, inv, full)
+    mean, inv, full = window_statistics(img, msk)
+    Hp, Wp = full.shape
     rows, cols = np.divmod(np.flatnonzero(~full.ravel()), Wp)
     S, flops = colour.masked_scores(img, msk, rows, cols, mean, inv, full, 64)
     ref = whole.scores(img, msk, rows, cols, mean, inv, full)
