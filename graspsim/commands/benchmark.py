@@ -17,12 +17,7 @@ def register(subparsers) -> None:
         "recognition",
         help="nested cross-validation of learner x encoder combinations (Table 1, Figure 5)",
     )
-    r.add_argument("--data", required=True, help="dataset root folder")
-    r.add_argument("--format", choices=["cornell", "jacquard"], required=True)
-    r.add_argument("--scale", type=float, default=None,
-                   help="resize images and rectangles (default 1 for Cornell, 0.5 for Jacquard)")
-    r.add_argument("--mapping", default=None,
-                   help="Cornell image-to-object mapping file (for --split object)")
+    _add_data_args(r)
     r.add_argument("--learners", nargs="+", default=None, metavar="L",
                    help="subset of SC OMP GSVQ NKM RP R (default: all)")
     r.add_argument("--encoders", nargs="+", default=None, metavar="E",
@@ -113,14 +108,19 @@ def _register_detection(sub) -> None:
     d.set_defaults(func=_detection)
 
 
-def _add_dataset_args(d) -> None:
-    """The dataset and the extra training data of ``detection`` and ``table2``."""
+def _add_data_args(d) -> None:
+    """The labelled dataset every benchmark reads."""
     d.add_argument("--data", required=True, help="dataset root folder")
     d.add_argument("--format", choices=["cornell", "jacquard"], required=True)
     d.add_argument("--scale", type=float, default=None,
                    help="resize images and rectangles (default 1 for Cornell, 0.5 for Jacquard)")
     d.add_argument("--mapping", default=None,
                    help="Cornell image-to-object mapping file (for --split object)")
+
+
+def _add_dataset_args(d) -> None:
+    """The dataset and the extra training data of ``detection`` and ``table2``."""
+    _add_data_args(d)
     d.add_argument("--extra-patches", default=None, metavar="FILE",
                    help="npz of unlabelled patches (graspsim patches) joined to each fold's "
                         "dictionary learning only (self-taught); the SVM's training is unchanged")

@@ -269,9 +269,7 @@ def _detect_folds(plan: DetectionPlan, executor, progress) -> None:
         tasks = [(det, samples[i], baselines, plan.seed + i,
                   {"config_key": plan.key, "fold": k}) for i in todo]
         for rec_ in executor.imap(_detect_one, tasks, desc=f"fold {k}", star=True):
-            with plan.results_path.open("a") as fh:
-                fh.write(json.dumps(rec_) + "\n")
-            done[rec_["image_id"]] = rec_
+            plan.add_result(rec_)
             bar.update(1)
     bar.close()
 

@@ -95,6 +95,12 @@ class DetectionPlan:
         """``out/results.jsonl``."""
         return self.out / "results.jsonl"
 
+    def add_result(self, record: dict) -> None:
+        """Append one image's result to ``results.jsonl`` and put it in ``done``."""
+        with self.results_path.open("a") as fh:
+            fh.write(json.dumps(record) + "\n")
+        self.done[record["image_id"]] = record
+
     def fold_model_path(self, k: int) -> Path:
         """Fold ``k``'s model stem (``PATH.npz`` + ``PATH.json``)."""
         return self.models.with_name(f"{self.models.name}_fold{k}")

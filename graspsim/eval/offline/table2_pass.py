@@ -209,9 +209,7 @@ def _detect(plans, splits, rows, executor, progress) -> None:
     results = executor.imap(detect_image, tasks, desc="detection", star=True)
     for need, recs in zip(targets, results, strict=True):
         for plan, rec_ in zip(need, recs, strict=True):
-            with plan.results_path.open("a") as fh:
-                fh.write(json.dumps(rec_) + "\n")
-            plan.done[rec_["image_id"]] = rec_
+            plan.add_result(rec_)
         bar.update(1)
     bar.close()
 
@@ -232,6 +230,5 @@ def _table(out: Path, summaries: dict, splits, rows, seconds: float) -> dict:
         table["splits"][split] = {
             "n_images": len(any_row["per_image"]), "n_folds": any_row["config"]["n_folds"],
             "rows": cells, "baselines": any_row["baselines"],
-            "config": {k: v for k, v in any_row["config"].items()
-                       if k not in ("learner", "encoder", "encoder_param", "C")}}
+            "config": {k: v for k, v in any_row["config"].items() if k not in _OWN}}
     return table
