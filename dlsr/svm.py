@@ -407,6 +407,14 @@ class _PrimalSystem:
         out[:d] += lam * x[:d]
         return out
 
+    def _factor_reaches(self, S) -> bool:
+        """Whether the last factorisation can serve the violators ``S`` (a boolean mask):
+        enough features for the reuse to pay, a valid factor, and at most
+        ``(d + 1) / _LOW_RANK_FRACTION`` rows entered or left since it was made."""
+        d = self.X.shape[1]
+        return (d >= _LOW_RANK_MIN_FEATURES and self._f_ok
+                and np.count_nonzero(S != self._f_in) <= (d + 1) // _LOW_RANK_FRACTION)
+
     def _low_rank_solve(self, S, lam, rhs):
         """Solve with the factor of the last factorisation (Woodbury, then refined against
         ``H + lam I``); None when the refinement does not converge."""
@@ -456,12 +464,11 @@ class _PrimalSystem:
         so is the minimiser.
         """
         d = self.X.shape[1]
-        if (d < _LOW_RANK_MIN_FEATURES or not self._f_ok or lam == self._f_lam
-                or idx.size == 0):
+        if lam == self._f_lam or idx.size == 0:
             return None
         S = np.zeros(len(self._in), dtype=bool)
         S[idx] = True
-        if np.count_nonzero(S != self._f_in) > (d + 1) // _LOW_RANK_FRACTION:
+        if not self._factor_reaches(S):
             return None
         S, rhs = self._update(idx, refresh=False)
         apply = self._factor_operator(S)
@@ -498,8 +505,7 @@ class _PrimalSystem:
         d = self.X.shape[1]
         S, rhs = self._update(idx, refresh)
         x = None
-        if (not refresh and d >= _LOW_RANK_MIN_FEATURES and self._f_ok and lam == self._f_lam
-                and np.count_nonzero(S != self._f_in) <= (d + 1) // _LOW_RANK_FRACTION):
+        if not refresh and lam == self._f_lam and self._factor_reaches(S):
             x = self._low_rank_solve(S, lam, rhs)
         if x is None:
             x = self._factorise_and_solve(S, lam, rhs)
