@@ -358,19 +358,10 @@ def train_detector(
     check_training_options(fit_grid, hard_negatives, hard_rounds, physical)
     if physical:
         _check_physical_options(samples, physical_weight, physical_bins)
-    if isinstance(extra_patches, (str, os.PathLike)):
-        from ..patches import load_patch_file
-
-        extra_patches = load_patch_file(extra_patches)
+    extra_patches = _loaded_patches(extra_patches)
     t0 = time.perf_counter()
-    sgrid = _training_grid(samples, config, fit_grid)
-    if data is None:
-        data = detection_training_data(samples, grid_negatives, sgrid,
-                                       config.get("region", "auto"),
-                                       negatives_per_image=negatives_per_image,
-                                       random_state=random_state)
-    if len(np.unique(data.labels)) < 2:
-        raise ValueError("training needs positive and negative rectangles")
+    sgrid, data = _training_data(samples, config, fit_grid, grid_negatives,
+                                 negatives_per_image, random_state, data)
     if representation is None:
         rep = fit_representation(data.images, data.masks, learner, n_atoms=n_atoms,
                                  whiten=whiten, n_patches=n_patches, extra=extra_patches,
@@ -454,6 +445,31 @@ def train_detector(
                         physical_edges=edges, physical_coef=w_phys)
 
 
+def _loaded_patches(extra):
+    """``extra_patches`` loaded when given as a patch file's path (as it is otherwise)."""
+    if isinstance(extra, (str, os.PathLike)):
+        from ..patches import load_patch_file
+
+        return load_patch_file(extra)
+    return extra
+
+
+def _training_data(samples, config: dict, fit_grid, grid_negatives, negatives_per_image,
+                   random_state, data=None):
+    """The search grid (:func:`_training_grid`) and the training rectangles
+    (:func:`detection_training_data`, unless ``data`` is given), which must hold both
+    classes."""
+    sgrid = _training_grid(samples, config, fit_grid)
+    if data is None:
+        data = detection_training_data(samples, grid_negatives, sgrid,
+                                       config.get("region", "auto"),
+                                       negatives_per_image=negatives_per_image,
+                                       random_state=random_state)
+    if len(np.unique(data.labels)) < 2:
+        raise ValueError("training needs positive and negative rectangles")
+    return sgrid, data
+
+
 def _training_grid(samples, config: dict, fit_grid) -> SearchGrid:
     """The search grid of a training (``config["grid"]``, the paper's by default), fitted to
     the positives of ``samples`` with ``fit_grid`` (then also put in ``config``)."""
@@ -509,24 +525,18 @@ def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDete
         raise ValueError("learner, encoder, encoder_param, C, data and representation are "
                          "per model or shared here, not options")
     options = dict(options)
-    extra = options.get("extra_patches")
-    if isinstance(extra, (str, os.PathLike)):
-        from ..patches import load_patch_file
+    if "extra_patches" in options:
+        options["extra_patches"] = _loaded_patches(options["extra_patches"])
+    defaults = inspect.signature(train_detector).parameters
 
-        options["extra_patches"] = load_patch_file(extra)
     def opt(name):  # an option given, else train_detector's default
-        return options.get(name, inspect.signature(train_detector).parameters[name].default)
+        return options.get(name, defaults[name].default)
 
     t0 = time.perf_counter()
     config = {k: v for k, v in options.items() if k in ("grid", "region")}
-    sgrid = _training_grid(samples, config, opt("fit_grid"))
-    data = detection_training_data(samples, opt("grid_negatives"), sgrid,
-                                   config.get("region", "auto"),
-                                   negatives_per_image=opt("negatives_per_image"),
-                                   random_state=random_state)
+    _, data = _training_data(samples, config, opt("fit_grid"), opt("grid_negatives"),
+                             opt("negatives_per_image"), random_state)
     shared = {"data": time.perf_counter() - t0}
-    if len(np.unique(data.labels)) < 2:
-        raise ValueError("training needs positive and negative rectangles")
     reps = {}
     for learner in dict.fromkeys(m["learner"] for m in models):
         t1 = time.perf_counter()
