@@ -468,12 +468,18 @@ class LatticeDetector:
         exact = DenseDetector(self.model, n_threads=self.n_threads).exact_scores(obs, cand)
         table = (table_surface(obs["depth"], obs.get("depth_valid"))
                  if self.model.physical else None)
-        scores = exact + self.model.physical_scores(obs, cand, region, table)
-        order = np.argsort(-scores, kind="stable")[: self.top_k]
+        rects, scores = self._ranked(obs, cand, region, exact, table)
         t2 = time.perf_counter()
-        return Detection(cand[order], scores[order], n_candidates=len(cand),
+        return Detection(rects, scores, n_candidates=len(cand),
                          n_encodings=len(cand) * PATCHES_PER_RECTANGLE, seconds=t2 - t0,
                          timings={"candidates": t1 - t0, "score": t2 - t1})
+
+    def _ranked(self, obs, cand, region, exact, table):
+        """The best ``top_k`` candidates and their scores (the exact scores plus the model's
+        physical term), best first."""
+        scores = exact + self.model.physical_scores(obs, cand, region, table)
+        order = np.argsort(-scores, kind="stable")[: self.top_k]
+        return cand[order], scores[order]
 
     def predict(self, obs) -> list[GraspRectangle]:
         """The top-k rectangles, best first (empty, with a logged reason, when none)."""
@@ -512,14 +518,8 @@ def detect_many(detectors, obs) -> list[Detection]:
     first = detectors[0]
     t0 = time.perf_counter()
     cand, reason, region = first.candidates(obs)
-    if reason:
-        shared = time.perf_counter() - t0
-        out = []
-        for _ in detectors:
-            empty = _empty(reason, time.perf_counter())
-            empty.seconds += shared
-            out.append(empty)
-        return out
+    if reason:  # each detector alone would have taken the candidates' seconds
+        return [_empty(reason, t0) for _ in detectors]
     t1 = time.perf_counter()
     images = DenseDetector(first.model, n_threads=first.n_threads).exact_images(obs, cand)
     shared = time.perf_counter() - t0
@@ -530,10 +530,9 @@ def detect_many(detectors, obs) -> list[Detection]:
         exact = DenseDetector(d.model, n_threads=d.n_threads).score_images(images)
         if d.model.physical and table is None:
             table = table_surface(obs["depth"], obs.get("depth_valid"))
-        scores = exact + d.model.physical_scores(obs, cand, region, table)
-        order = np.argsort(-scores, kind="stable")[: d.top_k]
+        rects, scores = d._ranked(obs, cand, region, exact, table)
         own = time.perf_counter() - t2
-        out.append(Detection(cand[order], scores[order], n_candidates=len(cand),
+        out.append(Detection(rects, scores, n_candidates=len(cand),
                              n_encodings=len(cand) * PATCHES_PER_RECTANGLE,
                              seconds=shared + own,
                              timings={"candidates": t1 - t0, "score": shared - (t1 - t0) + own,
