@@ -462,6 +462,33 @@ def test_a_low_rank_solve_that_does_not_converge_factorises(monkeypatch):
     np.testing.assert_allclose(np.r_[w, b], x, rtol=0, atol=1e-12 * np.abs(x).max())
 
 
+def _served(monkeypatch, method: str) -> list:
+    """Wrap ``_PrimalSystem.<method>`` so that each call appends whether it served (returned
+    something other than None) to the list returned."""
+    from dlsr import svm
+
+    used = []
+    original = getattr(svm._PrimalSystem, method)
+
+    def counted(self, *args):
+        out = original(self, *args)
+        used.append(out is not None)
+        return out
+
+    monkeypatch.setattr(svm._PrimalSystem, method, counted)
+    return used
+
+
+def _assert_same_minimiser(X, a, b) -> None:
+    """``a = (w, b)`` equals ``b`` to 1e-10 of its largest entry, with the same sign of every
+    decision value on ``X``."""
+    (w1, b1), (w0, b0) = a, b
+    scale = max(np.abs(w0).max(), abs(b0))
+    np.testing.assert_allclose(w1, w0, rtol=0, atol=1e-10 * scale)
+    assert abs(b1 - b0) <= 1e-10 * scale
+    np.testing.assert_array_equal(X @ w1 + b1 > 0, X @ w0 + b0 > 0)
+
+
 def test_newton_with_low_rank_solves_reaches_the_factorised_minimiser(monkeypatch):
     """The whole solver, with and without the low-rank solves, reaches the same minimiser
     (primal form, several C, each warm-started) in the same number of Newton steps."""
@@ -470,25 +497,14 @@ def test_newton_with_low_rank_solves_reaches_the_factorised_minimiser(monkeypatc
     monkeypatch.setattr(svm, "_LOW_RANK_MIN_FEATURES", 0)  # small test problems
 
     X, y = _planted(900, 120, seed=17)
-    used = []
-    low_rank_solve = svm._PrimalSystem._low_rank_solve
-
-    def counted(self, *args):
-        x = low_rank_solve(self, *args)
-        used.append(x is not None)
-        return x
-
-    monkeypatch.setattr(svm._PrimalSystem, "_low_rank_solve", counted)
+    used = _served(monkeypatch, "_low_rank_solve")
     with_low = squared_hinge_fit(X, y, C_VALUES, form="primal")
     assert sum(used) >= 3  # the low-rank solves did serve
     monkeypatch.setattr(svm._PrimalSystem, "_low_rank_solve", lambda *args: None)  # factorise
     without = squared_hinge_fit(X, y, C_VALUES, form="primal")
     for (w1, b1, n1), (w0, b0, n0) in zip(with_low, without, strict=True):
         assert n1 == n0
-        scale = max(np.abs(w0).max(), abs(b0))
-        np.testing.assert_allclose(w1, w0, rtol=0, atol=1e-10 * scale)
-        assert abs(b1 - b0) <= 1e-10 * scale
-        np.testing.assert_array_equal(X @ w1 + b1 > 0, X @ w0 + b0 > 0)
+        _assert_same_minimiser(X, (w1, b1), (w0, b0))
 
 
 def test_an_approximate_first_step_per_c_reaches_the_same_minimiser(monkeypatch):
@@ -500,24 +516,13 @@ def test_an_approximate_first_step_per_c_reaches_the_same_minimiser(monkeypatch)
     monkeypatch.setattr(svm, "_LOW_RANK_MIN_FEATURES", 0)  # small test problems
 
     X, y = _planted(900, 120, seed=19)
-    used = []
-    approximate = svm._PrimalSystem.approximate
-
-    def counted(self, *args):
-        out = approximate(self, *args)
-        used.append(out is not None)
-        return out
-
-    monkeypatch.setattr(svm._PrimalSystem, "approximate", counted)
+    used = _served(monkeypatch, "approximate")
     with_approx = squared_hinge_fit(X, y, C_VALUES, form="primal")
     assert sum(used) >= 2  # the approximations did serve (not for the first C)
     monkeypatch.setattr(svm._PrimalSystem, "approximate", lambda *args: None)
     exact = squared_hinge_fit(X, y, C_VALUES, form="primal")
     for (w1, b1, _), (w0, b0, _), C in zip(with_approx, exact, C_VALUES, strict=True):
-        scale = max(np.abs(w0).max(), abs(b0))
-        np.testing.assert_allclose(w1, w0, rtol=0, atol=1e-10 * scale)
-        assert abs(b1 - b0) <= 1e-10 * scale
-        np.testing.assert_array_equal(X @ w1 + b1 > 0, X @ w0 + b0 > 0)
+        _assert_same_minimiser(X, (w1, b1), (w0, b0))
         g = _grad(w1, b1, X, y, C)
         assert np.linalg.norm(g) <= 1e-6 * np.linalg.norm(_grad(np.zeros(120), 0.0, X, y, C))
 
