@@ -384,7 +384,10 @@ def encode_patches_multi(X, M, rep: Representation, grids: dict, polarity: bool 
         n_atoms`` with polarity splitting, else ``n_atoms``. Encoders sharing a code array share
         the same object.
     """
-    plans, codes = _multi_codes(X, M, rep, grids, cpu_seconds)
+    plans, needed = _code_plans(rep, grids)
+    codes: dict = {}
+    for done in _iter_codes(X, M, rep, needed, cpu_seconds):
+        codes.update(done)
     split: dict = {}
     out = {}
     for enc, keys in plans.items():
@@ -398,23 +401,10 @@ def encode_patches_multi(X, M, rep: Representation, grids: dict, polarity: bool 
     return out
 
 
-def _multi_codes(X, M, rep, grids, cpu_seconds):
-    """Unsplit codes of each computation the encoders need, each computed once.
-
-    A fully valid patch's masked lasso (penalty scaled by ``||m||_0 / p = 1``) and masked OMP
-    are the unmasked problems, so when both the masked and the unmasked computation of a
-    method are needed, the unmasked one also records the masked grid's values (snapshots of
-    the same lasso path, or the same OMP run) and the masked one solves only the patches with
-    a masked entry. The fully valid patches' masked codes are then the unmasked ones: the same
-    problem, solved with the Gram matrix ``D D^T`` (BLAS ``syrk``) instead of the masked group's
-    ``(D diag(1)) D^T`` (``gemm``), which differ in their last bits.
-
-    Returns ``plans`` (per encoder, one key ``(method, masked, value, split)`` per parameter)
-    and ``codes`` (``(method, masked, value)`` -> unsplit codes).
-    """
-    from ._dense import check_finite
-
-    check_finite(X, "the patches X")  # before the shared product below (kernel-dependent)
+def _code_plans(rep, grids):
+    """What the encoders of ``grids`` read: ``plans`` (per encoder, one key ``(method, masked,
+    value, split)`` per parameter) and ``needed`` (``(method, masked)`` -> the values its
+    computation must give, each once)."""
     plans = {}
     needed: dict = {}
     for enc, params in grids.items():
@@ -422,16 +412,38 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
         plans[enc] = [(method, masked, v, pol) for v in values]
         bucket = needed.setdefault((method, masked), [])
         bucket.extend(v for v in values if v not in bucket)
+    return plans, needed
+
+
+def _iter_codes(X, M, rep, needed, cpu_seconds):
+    """Unsplit codes of each computation in ``needed`` (:func:`_code_plans`), each computed once
+    and yielded as soon as it is done: a dict ``(method, masked, value)`` -> codes per
+    computation, so that a caller can pool and drop them before the next one (the codes of a
+    chunk of every computation together are about 26 MB per computation and value).
+
+    A fully valid patch's masked lasso (penalty scaled by ``||m||_0 / p = 1``) and masked OMP
+    are the unmasked problems, so when both the masked and the unmasked computation of a
+    method are needed, the unmasked one also records the masked grid's values (snapshots of
+    the same lasso path, or the same OMP run) and the masked one solves only the patches with
+    a masked entry. The fully valid patches' masked codes are then the unmasked ones: the same
+    problem, solved with the Gram matrix ``D D^T`` (BLAS ``syrk``) instead of the masked group's
+    ``(D diag(1)) D^T`` (``gemm``), which differ in their last bits. Only those recorded codes
+    are kept here until the masked computation has used them.
+    """
+    from ._dense import check_finite
+
+    check_finite(X, "the patches X")  # before the shared product below (kernel-dependent)
     # masked lasso / OMP whose unmasked partner runs too: the partner codes the fully valid rows
     paired = {meth for meth, masked in needed
               if masked and meth in ("lasso", "omp") and (meth, False) in needed}
     full = np.all(np.asarray(M, dtype=bool), axis=1) if paired else None
-    codes = {}
+    partner: dict = {}  # the unmasked codes of the masked values, until the masked run
     grams: dict = {}  # the masked Gram matrices of mask groups, for the masked lasso and OMP
     B = None  # X @ D.T in float64, computed once for every lasso and OMP computation
     zero_masked = None  # masked ones too, when the masked entries of X are 0 (they should be)
-    # unmasked computations first: their codes of the fully valid rows serve the masked ones
-    for (method, masked), values in sorted(needed.items(), key=lambda kv: kv[0][1]):
+    # a method's unmasked computation just before its masked one, whose fully valid rows it
+    # codes: its codes (one block for all values) are dropped once the masked one has run
+    for (method, masked), values in sorted(needed.items()):
         c0 = time.process_time()
         shared = None
         if method in ("lasso", "omp"):
@@ -444,20 +456,25 @@ def _multi_codes(X, M, rep, grids, cpu_seconds):
                 shared = B
         if method in paired and not masked:
             run = list(dict.fromkeys([*values, *needed[(method, True)]]))
-            for v, A in zip(run, _method_codes(X, M, rep, method, False, run, shared),
-                            strict=True):
-                codes[(method, False, v)] = A
+            done = {(method, False, v): A for v, A in
+                    zip(run, _method_codes(X, M, rep, method, False, run, shared), strict=True)}
+            partner.update({(method, False, v): done[(method, False, v)]
+                            for v in needed[(method, True)]})
+            done = {(method, False, v): done[(method, False, v)] for v in values}
         elif method in paired:
-            codes.update(_masked_with_full_rows(X, M, rep, method, values, shared, grams, full,
-                                                codes))
+            done = _masked_with_full_rows(X, M, rep, method, values, shared, grams, full,
+                                          partner)
+            for v in values:
+                partner.pop((method, False, v), None)
         else:
-            for v, A in zip(values, _method_codes(X, M, rep, method, masked, values, shared,
-                                                  grams if masked else None), strict=True):
-                codes[(method, masked, v)] = A
+            done = {(method, masked, v): A for v, A in
+                    zip(values, _method_codes(X, M, rep, method, masked, values, shared,
+                                              grams if masked else None), strict=True)}
         if cpu_seconds is not None:
             key = (method, masked)
             cpu_seconds[key] = cpu_seconds.get(key, 0.0) + time.process_time() - c0
-    return plans, codes
+        yield done
+        del done  # not held through the next computation
 
 
 def _masked_with_full_rows(X, M, rep, method, values, shared, grams, full, codes) -> dict:
@@ -562,6 +579,7 @@ def rectangle_features_multi(
         if not list(params):
             raise ValueError(f"params of {enc!r} must hold at least one encoder parameter")
     acc = cpu_seconds if cpu_seconds is not None else {}
+    plans, needed = _code_plans(rep, grids)
     # see dlsr.memory: freshly faulted pages (huge or not) cost more than they save
     with small_pages(), reused_heap():
         out = None
@@ -574,15 +592,20 @@ def rectangle_features_multi(
             Xp = _preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
                                      (rep.zca_mean, rep.zca_matrix))
             acc["patches"] = acc.get("patches", 0.0) + time.process_time() - c0
-            plans, codes = _multi_codes(Xp, PM.reshape(b * g, p), rep, grids, acc)
-            c0 = time.process_time()
             side = int(round(np.sqrt(g)))
             pooled: dict = {}
-            for keys in plans.values():
-                for key in keys:
-                    if key not in pooled:
-                        pooled[key] = _split_pool(codes[key[:3]].reshape(b, side, side, -1),
-                                                  bool(polarity and key[3]))
+            # each computation's codes pooled as soon as they are done, then dropped: a chunk
+            # never holds every computation's codes at once
+            for done in _iter_codes(Xp, PM.reshape(b * g, p), rep, needed, acc):
+                c0 = time.process_time()
+                for keys in plans.values():
+                    for key in keys:
+                        if key not in pooled and key[:3] in done:
+                            pooled[key] = _split_pool(done[key[:3]].reshape(b, side, side, -1),
+                                                      bool(polarity and key[3]))
+                del done
+                acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
+            c0 = time.process_time()
             if out is None:  # encoders reading the same codes share one array
                 arrays = {key: np.empty((n, pooled[key].shape[1]), dtype=np.float32)
                           for key in pooled}
