@@ -40,11 +40,13 @@ timing is kept in ``OUT/timings.json`` as soon as it finishes. A measurement lon
 session is stopped with SIGTERM (or Ctrl-C): the running command saves and stops, the part it
 ran (wall, CPU, peak memory) is kept in ``OUT/partial.json``, and the command that finishes it
 adds those parts (``segments``: how many runs it took). The default ``--out``,
-``results/bench_scale``, is committed without its bulky files (the subsets, the saved
-representations), so the next session continues it on a new machine.
+``results/cornell-scale``, is committed without its bulky files (the subsets, the saved
+representations), so the next session continues it on a new machine. (``results/bench_scale``
+holds the measurements of 2026-12-04 and 2026-12-05, made by the code before the Table 2 one
+pass and the SVM's second pass, beside other work.)
 
 Usage: python scripts/bench_scale.py --sizes 100,300,885 [--jobs 2] [--standin runs/standin]
-       [--out results/bench_scale] [--tables 1,2]
+       [--out results/cornell-scale] [--tables 1,2]
 """
 
 from __future__ import annotations
@@ -305,7 +307,7 @@ def main(argv=None) -> int:
     ap.add_argument("--tables", default="1,2")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--standin", default="runs/standin", help="stand-in folder (made or reused)")
-    ap.add_argument("--out", default="results/bench_scale",
+    ap.add_argument("--out", default="results/cornell-scale",
                     help="timings and the benchmarks' records (the default is committed, so a "
                          "measurement of several sessions continues on a new machine)")
     ap.add_argument("--standin-images", type=int, default=CORNELL["images"],
