@@ -14,7 +14,9 @@ under ``--standin``; the smaller sizes are its first images):
 
 Each command runs as a child process with ``--jobs`` workers. Per size and table: ``wall_s``,
 ``cpu_s`` (the whole process tree's user + system seconds, from ``getrusage``),
-``peak_rss_mb`` (the largest sum of the tree's resident memory, sampled every 0.2 s from
+``peak_pss_mb`` (the largest sum of the tree's proportional set sizes: the memory it holds,
+pages shared between its processes counted once), ``peak_rss_mb`` (the largest sum of the
+tree's resident sets, which counts shared pages once per process; sampled every 0.2 s from
 ``/proc``) and ``stages``: worker seconds per stage, read from the commands' own records --
 Table 1: ``patches``, ``whitening``, ``dictionary`` (the representations), ``coding`` and
 ``svm_inner_cv``; Table 2: ``detection_per_image`` (mean seconds per test image and row; in
@@ -72,8 +74,23 @@ from graspsim.data.standin import CORNELL, standin_subset
 TABLE2_ROWS = (("NKM", "Natural"), ("NKM", "SC"), ("OMP", "Natural"), ("RP", "Natural"))
 
 
-def _tree(root_pid: int) -> tuple[float, dict]:
-    """Resident memory of ``root_pid`` and all its descendants (MiB), and their user + system
+def _pss_kb(pid: int) -> int:
+    """Proportional set size of ``pid`` (kB): its private pages plus its share of pages it
+    maps with other processes (0 when unreadable)."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as fh:
+            for line in fh:
+                if line.startswith("Pss:"):
+                    return int(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
+def _tree(root_pid: int) -> tuple[float, float, dict]:
+    """Resident memory of ``root_pid`` and all its descendants (MiB): the sum of their
+    resident sets and the sum of their proportional set sizes (shared pages counted once, not
+    once per process: loky's memory-mapped arrays, the libraries), and their user + system
     clock ticks per pid, from /proc."""
     children: dict[int, list[int]] = {}
     rss: dict[int, int] = {}
@@ -92,14 +109,16 @@ def _tree(root_pid: int) -> tuple[float, dict]:
         children.setdefault(int(fields.get("PPid", "0").strip() or 0), []).append(pid)
         rss[pid] = int(fields.get("VmRSS", "0 kB").split()[0])
         ticks[pid] = int(stat[11]) + int(stat[12])  # utime, stime
-    total, todo, mine = 0, [root_pid], {}
+    total, pss, todo, mine = 0, 0, [root_pid], {}
     while todo:
         pid = todo.pop()
         total += rss.get(pid, 0)
+        if pid in rss:
+            pss += _pss_kb(pid)
         if pid in ticks:
             mine[pid] = ticks[pid]
         todo.extend(children.get(pid, []))
-    return total / 1024, mine
+    return total / 1024, pss / 1024, mine
 
 
 class Interrupted(KeyboardInterrupt):
@@ -142,13 +161,15 @@ def timed(cmd: list[str]) -> dict:
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd)
     samples: list[tuple[float, float]] = []
+    pss: list[float] = []
     ticks: dict = {}
     stop = threading.Event()
 
     def sample():
         while not stop.wait(0.2):
-            mb, now = _tree(proc.pid)
+            mb, pss_mb, now = _tree(proc.pid)
             samples.append((time.perf_counter() - t0, mb))
+            pss.append(pss_mb)
             for pid, t in now.items():
                 ticks[pid] = max(ticks.get(pid, 0), t)
 
@@ -173,6 +194,7 @@ def timed(cmd: list[str]) -> dict:
     cpu = max(cpu, sum(ticks.values()) / os.sysconf("SC_CLK_TCK"))
     peak = max((m for _, m in samples), default=0.0)
     record = {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak, 1),
+              "peak_pss_mb": round(max(pss, default=0.0), 1),
               "rss_trace_mb": rss_trace(samples, wall), "code": version,
               "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)]}
     if interrupted is not None:
@@ -202,6 +224,7 @@ def resumed(key: str, cmd: list[str], partial_path: Path) -> dict:
     out = {"wall_s": round(sum(p["wall_s"] for p in allp), 2),
            "cpu_s": round(sum(p["cpu_s"] for p in allp), 2),
            "peak_rss_mb": max(p["peak_rss_mb"] for p in allp),
+           "peak_pss_mb": max(p.get("peak_pss_mb", 0.0) for p in allp),
            "rss_trace_mb": [p["rss_trace_mb"] for p in allp], "segments": len(allp),
            "code": [p.get("code") for p in allp],
            "load_average": [p.get("load_average") for p in allp]}

@@ -209,6 +209,31 @@ def test_bench_scale_timing_names_the_code_and_the_load_it_ran_beside(tmp_path, 
     assert bench.resumed("table2_300", ["cmd"], partial)["code"] == ["aaa", "bbb"]
 
 
+def test_bench_scale_tree_memory_counts_shared_pages_once_in_its_pss():
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    if not Path("/proc/self/smaps_rollup").exists():
+        pytest.skip("no /proc/PID/smaps_rollup on this kernel")
+    bench = _bench_scale()
+    # a child that maps 200 MB of anonymous shared memory and writes it, then forks, and both
+    # read every page: the two processes hold the same pages, which their resident sets count
+    # twice
+    code = ("import mmap, os, time; m = mmap.mmap(-1, 200 << 20); m.write(b'x' * (200 << 20));"
+            " os.fork(); m[::4096]; time.sleep(3)")
+    proc = subprocess.Popen([sys.executable, "-c", code])
+    try:
+        time.sleep(1.5)
+        rss, pss, ticks = bench._tree(proc.pid)
+    finally:
+        proc.wait()
+    assert len(ticks) == 2  # the child and its fork
+    assert rss > 400 and pss < rss - 150, (rss, pss)
+    assert pss > 200
+
+
 def test_bench_scale_timed_command_stopped_keeps_its_cpu_and_ends_the_child():
     import signal
     import subprocess
