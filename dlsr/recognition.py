@@ -42,10 +42,10 @@ from .features import (
     LEARNERS,
     DLSRFeatures,
     Representation,
-    _encoder_plan,
     fit_representation,
     rectangle_features_multi,
 )
+from .features.encoding import encoder_plan
 from .memory import reused_heap
 from .records import atomic_write, file_errors, load_npz, read_jsonl, write_text_atomic
 from .svm import FeatureStandardizer, SquaredHingeSVC, squared_hinge_fit
@@ -479,7 +479,7 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
     feature_wall += time.perf_counter() - t0
     users: dict = {}
     for enc in encoders:
-        method, masked, _, _ = _encoder_plan(rep, enc, grids[enc])
+        method, masked, _, _ = encoder_plan(rep, enc, grids[enc])
         users.setdefault((method, masked), []).append(enc)
     shared = sum(v for k, v in cpu.items() if k not in users)
     shared += feature_cpu - sum(cpu.values())  # anything not timed inside

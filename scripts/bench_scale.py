@@ -21,7 +21,10 @@ Table 1: ``patches``, ``whitening``, ``dictionary`` (the representations), ``cod
 the one pass each row's seconds count the candidates and rectangle images it shares in full,
 so ``detection``, their sum, is an upper bound of the pass's detection time).
 ``rss_trace_mb`` is the peak memory in each tenth of the run's wall time (flat when nothing
-accumulates across cells and folds). ``growth`` gives, per table and stage, the exponent ``k``
+accumulates across cells and folds). ``code`` names the commit that ran (``+dirty`` when
+tracked files differed from it) and ``load_average`` the machine's 1-minute load before and
+after: a measurement beside other work, or of older code, says so (one entry per part when a
+command took several runs). ``growth`` gives, per table and stage, the exponent ``k``
 of a least-squares fit of ``time = a * size^k`` over the sizes measured, and ``projected`` the
 fit's ``wall_s`` and ``cpu_s`` at Cornell's 885 images when that size was not measured (a
 projection, not a measurement).
@@ -37,11 +40,13 @@ timing is kept in ``OUT/timings.json`` as soon as it finishes. A measurement lon
 session is stopped with SIGTERM (or Ctrl-C): the running command saves and stops, the part it
 ran (wall, CPU, peak memory) is kept in ``OUT/partial.json``, and the command that finishes it
 adds those parts (``segments``: how many runs it took). The default ``--out``,
-``results/bench_scale``, is committed without its bulky files (the subsets, the saved
-representations), so the next session continues it on a new machine.
+``results/cornell-scale``, is committed without its bulky files (the subsets, the saved
+representations), so the next session continues it on a new machine. (``results/bench_scale``
+holds the measurements of 2026-12-04 and 2026-12-05, made by the code before the Table 2 one
+pass and the SVM's second pass, beside other work.)
 
 Usage: python scripts/bench_scale.py --sizes 100,300,885 [--jobs 2] [--standin runs/standin]
-       [--out results/bench_scale] [--tables 1,2]
+       [--out results/cornell-scale] [--tables 1,2]
 """
 
 from __future__ import annotations
@@ -108,13 +113,31 @@ class Interrupted(KeyboardInterrupt):
         self.cause = cause
 
 
+def code_version() -> str | None:
+    """The repository's commit, with ``+dirty`` when tracked files differ from it (None outside
+    a git checkout): which code a timing measured."""
+    repo = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.check_output(["git", "-C", str(repo), "rev-parse", "--short=12",
+                                        "HEAD"], text=True, stderr=subprocess.DEVNULL).strip()
+        dirty = subprocess.check_output(["git", "-C", str(repo), "status", "--porcelain",
+                                         "--untracked-files=no"], text=True,
+                                        stderr=subprocess.DEVNULL).strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return head + ("+dirty" if dirty else "")
+
+
 def timed(cmd: list[str]) -> dict:
-    """Run ``cmd``; its wall and CPU seconds and the peak memory of its process tree.
+    """Run ``cmd``; its wall and CPU seconds and the peak memory of its process tree, with the
+    code it ran (:func:`code_version`) and the machine's 1-minute load average before and
+    after (anything else running inflates the wall time).
 
     Stopped by SIGTERM or Ctrl-C, the command is sent SIGTERM (the benchmarks save and stop)
     and :class:`Interrupted` carries the part it ran: CPU seconds from ``getrusage`` or, when
     larger (workers that were never waited for), the tree's ticks sampled from /proc.
     """
+    version, load_before = code_version(), os.getloadavg()[0]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd)
@@ -150,7 +173,8 @@ def timed(cmd: list[str]) -> dict:
     cpu = max(cpu, sum(ticks.values()) / os.sysconf("SC_CLK_TCK"))
     peak = max((m for _, m in samples), default=0.0)
     record = {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak, 1),
-              "rss_trace_mb": rss_trace(samples, wall)}
+              "rss_trace_mb": rss_trace(samples, wall), "code": version,
+              "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)]}
     if interrupted is not None:
         raise Interrupted(record, interrupted) from None
     if code != 0:
@@ -178,7 +202,9 @@ def resumed(key: str, cmd: list[str], partial_path: Path) -> dict:
     out = {"wall_s": round(sum(p["wall_s"] for p in allp), 2),
            "cpu_s": round(sum(p["cpu_s"] for p in allp), 2),
            "peak_rss_mb": max(p["peak_rss_mb"] for p in allp),
-           "rss_trace_mb": [p["rss_trace_mb"] for p in allp], "segments": len(allp)}
+           "rss_trace_mb": [p["rss_trace_mb"] for p in allp], "segments": len(allp),
+           "code": [p.get("code") for p in allp],
+           "load_average": [p.get("load_average") for p in allp]}
     partial.pop(key, None)
     write_json_atomic(partial_path, partial, indent=1)
     return out
@@ -281,7 +307,7 @@ def main(argv=None) -> int:
     ap.add_argument("--tables", default="1,2")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--standin", default="runs/standin", help="stand-in folder (made or reused)")
-    ap.add_argument("--out", default="results/bench_scale",
+    ap.add_argument("--out", default="results/cornell-scale",
                     help="timings and the benchmarks' records (the default is committed, so a "
                          "measurement of several sessions continues on a new machine)")
     ap.add_argument("--standin-images", type=int, default=CORNELL["images"],
@@ -371,7 +397,7 @@ def _run(args) -> int:
             row["table2"] = {**t, "stages": table2_stages(dests),
                              "detector": table2_detector(dests[0]), "one_pass": True}
             write_json_atomic(timings_path, timings, indent=1)
-    result = {"machine": {"cpus": os.cpu_count(), "jobs": args.jobs,
+    result = {"machine": {"cpus": os.cpu_count(), "jobs": args.jobs, "code": code_version(),
                           "platform": sys.platform},
               "standin": made["reached"], "sizes": {s: timings[str(s)] for s in map(str, sizes)},
               "growth": growth({s: timings[s] for s in map(str, sizes)}),

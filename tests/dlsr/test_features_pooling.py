@@ -46,13 +46,13 @@ def test_unpack_rejects_wrong_width():
 @pytest.mark.parametrize("polarity", [True, False])
 def test_fused_split_pool_equals_split_then_pool(rng, polarity):
     from dlsr.coding import polarity_split
-    from dlsr.features import _split_pool
+    from dlsr.features.pooling import split_pool
 
     codes = rng.normal(size=(3, 19, 19, 5)).astype(np.float32)
     codes[codes < 0.3] = 0.0  # sparse, with exact zeros
     split = polarity_split(codes.reshape(-1, 5)).reshape(3, 19, 19, -1) if polarity else codes
     expected = quadrant_pool(split.astype(np.float64))
-    got = _split_pool(codes, polarity)
+    got = split_pool(codes, polarity)
     assert got.shape == expected.shape == (3, 4 * 5 * (2 if polarity else 1))
     assert got.dtype == np.float32
     np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-5)

@@ -176,6 +176,39 @@ def test_bench_scale_adds_the_parts_of_a_command_stopped_across_sessions(tmp_pat
     assert "table1_885" not in bench.read_json(partial, "p")  # used up
 
 
+def test_bench_scale_timing_names_the_code_and_the_load_it_ran_beside(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    bench = _bench_scale()
+    t = bench.timed([sys.executable, "-c", "pass"])
+    head = subprocess.run(["git", "-C", str(Path(bench.__file__).parents[1]), "rev-parse",
+                           "--short=12", "HEAD"], capture_output=True, text=True)
+    if head.returncode == 0:  # a checkout: the commit, marked when tracked files differ
+        assert t["code"].split("+")[0] == head.stdout.strip()
+        assert t["code"].endswith("+dirty") == bool(subprocess.run(
+            ["git", "-C", str(Path(bench.__file__).parents[1]), "status", "--porcelain",
+             "--untracked-files=no"], capture_output=True, text=True).stdout.strip())
+    else:
+        assert t["code"] is None
+    assert len(t["load_average"]) == 2 and all(v >= 0 for v in t["load_average"])
+    # parts of one command run by different code are all named
+    partial = tmp_path / "partial.json"
+    runs = iter([bench.Interrupted(dict(t, code="aaa")), dict(t, code="bbb")])
+
+    def fake_timed(cmd):
+        r = next(runs)
+        if isinstance(r, BaseException):
+            raise r
+        return r
+
+    monkeypatch.setattr(bench, "timed", fake_timed)
+    with pytest.raises(bench.Interrupted):
+        bench.resumed("table2_300", ["cmd"], partial)
+    assert bench.resumed("table2_300", ["cmd"], partial)["code"] == ["aaa", "bbb"]
+
+
 def test_bench_scale_timed_command_stopped_keeps_its_cpu_and_ends_the_child():
     import signal
     import subprocess
@@ -224,6 +257,7 @@ def test_bench_scale_size_stopped_in_its_first_command_continues_it(tmp_path, mo
     standin.mkdir()
     (standin / "standin.json").write_text(json.dumps({"reached": {"images": 885}}))
     monkeypatch.setattr(bench.subprocess, "run", lambda *a, **k: None)  # the stand-in is made
+    monkeypatch.setattr(bench, "code_version", lambda: "abc")
     monkeypatch.setattr(bench, "standin_subset", lambda src, dst, n: dst)
     monkeypatch.setattr(bench, "data_fingerprint", lambda data, made: {"images": 100})
     monkeypatch.setattr(bench, "table1_stages", lambda dest: {})

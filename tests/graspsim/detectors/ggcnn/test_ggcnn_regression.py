@@ -1,7 +1,8 @@
 """GG-CNN's behaviour is kept across the refactor that made its data, training and files shared
 with GR-ConvNet: committed GG-CNN models (``results/ggcnn-curve/models``) load and give the
 maps and rectangles they gave before it, a committed checkpoint still loads, and a short
-training run gives the weights it gave before.
+training run gives the weights it gave before (to float32 rounding: training has run in the
+channels-last layout since).
 
 ``data/ggcnn_reference.npz`` was written by :func:`reference_outputs` with the code as it was
 before the refactor (``python tests/graspsim/detectors/ggcnn/test_ggcnn_regression.py``); the
@@ -95,8 +96,12 @@ def test_committed_ggcnn_models_predict_as_before(reference, tmp_path):
         np.testing.assert_allclose(got[f"{name}/scores"], reference[f"{name}/scores"],
                                    atol=1e-5)
     for k in reference:
-        if k.startswith(("ckpt/", "train/")):
+        if k.startswith("ckpt/"):
             np.testing.assert_array_equal(got[k], reference[k], err_msg=k)
+        elif k.startswith("train/"):
+            # training runs channels-last since the reference was written: the convolutions
+            # sum in another order (largest change measured 2.7e-8, on weights up to 0.29)
+            np.testing.assert_allclose(got[k], reference[k], rtol=0, atol=1e-6, err_msg=k)
 
 
 if __name__ == "__main__":  # writes the reference (only with the code before the refactor)
