@@ -152,12 +152,10 @@ def test_bench_scale_names_the_data_each_size_was_measured_on(tmp_path):
     assert bench.data_fingerprint(tmp_path, other) != first
 
 
-def test_bench_scale_adds_the_parts_of_a_command_stopped_across_sessions(tmp_path, monkeypatch):
-    bench = _bench_scale()
-    partial = tmp_path / "partial.json"
-    part = {"wall_s": 10.0, "cpu_s": 18.0, "peak_rss_mb": 900.0, "rss_trace_mb": [900.0]}
-    runs = iter([bench.Interrupted(part), bench.Interrupted(dict(part, peak_rss_mb=950.0)),
-                 {"wall_s": 5.0, "cpu_s": 9.0, "peak_rss_mb": 700.0, "rss_trace_mb": [700.0]}])
+def _replayed(outcomes):
+    """A stand-in for ``bench.timed`` giving ``outcomes`` in turn: a record is returned, an
+    exception (a stopped command's ``Interrupted``) raised."""
+    runs = iter(outcomes)
 
     def fake_timed(cmd):
         r = next(runs)
@@ -165,7 +163,16 @@ def test_bench_scale_adds_the_parts_of_a_command_stopped_across_sessions(tmp_pat
             raise r
         return r
 
-    monkeypatch.setattr(bench, "timed", fake_timed)
+    return fake_timed
+
+
+def test_bench_scale_adds_the_parts_of_a_command_stopped_across_sessions(tmp_path, monkeypatch):
+    bench = _bench_scale()
+    partial = tmp_path / "partial.json"
+    part = {"wall_s": 10.0, "cpu_s": 18.0, "peak_rss_mb": 900.0, "rss_trace_mb": [900.0]}
+    monkeypatch.setattr(bench, "timed", _replayed(
+        [bench.Interrupted(part), bench.Interrupted(dict(part, peak_rss_mb=950.0)),
+         {"wall_s": 5.0, "cpu_s": 9.0, "peak_rss_mb": 700.0, "rss_trace_mb": [700.0]}]))
     for _ in range(2):  # two sessions stopped, each keeps the part it ran
         with pytest.raises(bench.Interrupted):
             bench.resumed("table1_885", ["cmd"], partial)
@@ -183,27 +190,21 @@ def test_bench_scale_timing_names_the_code_and_the_load_it_ran_beside(tmp_path, 
 
     bench = _bench_scale()
     t = bench.timed([sys.executable, "-c", "pass"])
-    head = subprocess.run(["git", "-C", str(Path(bench.__file__).parents[1]), "rev-parse",
-                           "--short=12", "HEAD"], capture_output=True, text=True)
+    repo = str(Path(bench.__file__).parents[1])
+    head = subprocess.run(["git", "-C", repo, "rev-parse", "--short=12", "HEAD"],
+                          capture_output=True, text=True)
     if head.returncode == 0:  # a checkout: the commit, marked when tracked files differ
         assert t["code"].split("+")[0] == head.stdout.strip()
         assert t["code"].endswith("+dirty") == bool(subprocess.run(
-            ["git", "-C", str(Path(bench.__file__).parents[1]), "status", "--porcelain",
+            ["git", "-C", repo, "status", "--porcelain",
              "--untracked-files=no"], capture_output=True, text=True).stdout.strip())
     else:
         assert t["code"] is None
     assert len(t["load_average"]) == 2 and all(v >= 0 for v in t["load_average"])
     # parts of one command run by different code are all named
     partial = tmp_path / "partial.json"
-    runs = iter([bench.Interrupted(dict(t, code="aaa")), dict(t, code="bbb")])
-
-    def fake_timed(cmd):
-        r = next(runs)
-        if isinstance(r, BaseException):
-            raise r
-        return r
-
-    monkeypatch.setattr(bench, "timed", fake_timed)
+    monkeypatch.setattr(bench, "timed", _replayed([bench.Interrupted(dict(t, code="aaa")),
+                                                   dict(t, code="bbb")]))
     with pytest.raises(bench.Interrupted):
         bench.resumed("table2_300", ["cmd"], partial)
     assert bench.resumed("table2_300", ["cmd"], partial)["code"] == ["aaa", "bbb"]
