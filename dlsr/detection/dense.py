@@ -345,12 +345,31 @@ class _PatchScorer:
         return self._blank
 
     def _generic(self, img, msk, rows, cols, mean, inv, full):
+        return self.encoded_scores(*self.whitened(img, msk, rows, cols, mean, inv, full))
+
+    def whitened(self, img, msk, rows, cols, mean, inv, full):
+        """The patches at ``(rows, cols)`` standardised, whitened and re-masked (masked entries
+        0), ``(n, 288)`` float32, and their masks as 0/1 float32: what the encoder reads."""
         X = self._gather(img, msk, rows, cols, mean, inv, full)
         M = self._masks(msk, rows, cols)
         if self.whiten:
             X = X @ self.P
             X -= self.mP
             X *= M
+        return X, M
+
+    def shares_whitening(self, other) -> bool:
+        """Whether :meth:`whitened` gives ``other``'s patches bit for bit (the same whitening
+        or none for both): the models of one fold whiten alike whatever their learner, since
+        their representations draw the same patches from the same seed."""
+        if self.whiten != other.whiten:
+            return False
+        return not self.whiten or (np.array_equal(self.P, other.P)
+                                   and np.array_equal(self.mP, other.mP))
+
+    def encoded_scores(self, X, M) -> np.ndarray:
+        """``(n, q)`` scores of whitened patches ``X`` with masks ``M`` (:meth:`whitened`),
+        through the model's encoder; ``X`` and ``M`` are only read."""
         m = self.model
         codes = encode_patches(X, M > 0.5, m.representation, m.encoder, m.encoder_param,
                                m.polarity)
@@ -401,6 +420,99 @@ def _map(pool, fn, items) -> list:
     if pool is None or len(items) < 2:
         return [fn(x) for x in items]
     return list(pool.map(fn, items))
+
+
+def score_images_many(detectors, images) -> list[np.ndarray]:
+    """Each detector's :meth:`DenseDetector.score_images` of the same rectangle images, the
+    patches whitened once for the models that whiten alike.
+
+    The models of one fold whiten alike whatever their learner (their representations draw
+    the same patches from the same seed): the patches of the encoders other than NKM's
+    triangle codes (SC, OMP, RP...) are then gathered, standardised and whitened once for all
+    of them, in the same chunks, so each detector's scores are the ones it gives alone, bit
+    for bit.
+
+    Parameters
+    ----------
+    detectors : sequence of DenseDetector
+        Of one preprocessing and one ``chunk_size``; the first one's ``n_threads`` is used.
+    images : tuple or None
+        From :meth:`DenseDetector.exact_images`.
+
+    Returns
+    -------
+    scores : list of ndarray of shape (n,), float64
+    seconds : list of float
+        Per detector, the wall seconds it would have taken alone: the whole scoring's wall
+        seconds times its share of the CPU seconds, a shared whitening counted in full for
+        each detector that reads it.
+    """
+    detectors = list(detectors)
+    if images is None:
+        return [np.zeros(0) for _ in detectors], [0.0] * len(detectors)
+    if len({d.chunk_size for d in detectors}) > 1:
+        raise ValueError("score_images_many needs detectors of one chunk_size")
+    t0 = time.perf_counter()
+    with _one_blas_thread(), detectors[0]._pool() as pool:
+        scores, alone, spent = _scores_of_images(detectors, images, pool)
+    wall = time.perf_counter() - t0
+    return scores, [wall * a / spent if spent > 0 else wall for a in alone]
+
+
+def _scores_of_images(detectors, images, pool):
+    """Scores of every detector; with the thread CPU seconds each would take alone and those
+    spent (a shared whitening once)."""
+    n, img, msk, rows, cols, mean, inv, full = images
+    weights = [d.model.quadrant_weights() for d in detectors]
+    scorers = [_PatchScorer(d.model, V, by_rows=True)
+               for d, (V, _) in zip(detectors, weights, strict=True)]
+    # groups of generic scorers that whiten alike: one whitening per group and chunk
+    groups: list[list[int]] = []
+    for i, sc in enumerate(scorers):
+        if sc.triangle:
+            groups.append([i])
+            continue
+        for g in groups:
+            first = scorers[g[0]]
+            if not first.triangle and first.shares_whitening(sc):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    per = max(1, detectors[0].chunk_size // PATCHES_PER_RECTANGLE) * PATCHES_PER_RECTANGLE
+    spans = [(s, min(s + per, len(rows))) for s in range(0, len(rows), per)]
+
+    def chunk(se):
+        r, c = rows[se[0]:se[1]], cols[se[0]:se[1]]
+        out = [None] * len(scorers)
+        alone = np.zeros(len(scorers))
+        start = time.thread_time()
+        for g in groups:
+            t = time.thread_time()
+            first = scorers[g[0]]
+            if len(g) == 1:
+                out[g[0]] = first.scores(img, msk, r, c, mean, inv, full)
+                alone[g[0]] = time.thread_time() - t
+                continue
+            X, M = first.whitened(img, msk, r, c, mean, inv, full)
+            shared = time.thread_time() - t
+            for i in g:
+                t = time.thread_time()
+                out[i] = scorers[i].encoded_scores(X, M)
+                alone[i] = shared + time.thread_time() - t
+        return out, alone, time.thread_time() - start
+
+    done = _map(pool, chunk, spans)
+    alone = sum(a for _, a, _ in done)
+    spent = sum(t for _, _, t in done)
+    result = []
+    for i, (_, const) in enumerate(weights):
+        S = np.concatenate([d[0][i] for d in done])
+        S = S.reshape(n, GRID, GRID, -1).astype(np.float64)
+        pooled = (S[:, :SPLIT, :SPLIT, 0].sum((1, 2)) + S[:, :SPLIT, SPLIT:, 1].sum((1, 2))
+                  + S[:, SPLIT:, :SPLIT, 2].sum((1, 2)) + S[:, SPLIT:, SPLIT:, 3].sum((1, 2)))
+        result.append(pooled + const)
+    return result, list(alone), spent
 
 
 class _CanvasCache:
@@ -674,17 +786,7 @@ class DenseDetector(_Base):
         return n, img, msk, rows, cols, mean, inv, full
 
     def _score_images(self, images, pool) -> np.ndarray:
-        n, img, msk, rows, cols, mean, inv, full = images
-        V, const = self.model.quadrant_weights()
-        scorer = _PatchScorer(self.model, V, by_rows=True)
-        per = max(1, self.chunk_size // PATCHES_PER_RECTANGLE) * PATCHES_PER_RECTANGLE
-        spans = [(s, min(s + per, len(rows))) for s in range(0, len(rows), per)]
-        S = np.concatenate(_map(pool, lambda se: scorer.scores(
-            img, msk, rows[se[0]:se[1]], cols[se[0]:se[1]], mean, inv, full), spans))
-        S = S.reshape(n, GRID, GRID, -1).astype(np.float64)
-        pooled = (S[:, :SPLIT, :SPLIT, 0].sum((1, 2)) + S[:, :SPLIT, SPLIT:, 1].sum((1, 2))
-                  + S[:, SPLIT:, :SPLIT, 2].sum((1, 2)) + S[:, SPLIT:, SPLIT:, 3].sum((1, 2)))
-        return pooled + const
+        return _scores_of_images([self], images, pool)[0][0]
 
     def _neighbourhood(self, obs, seeds, region=None):
         g = self.grid

@@ -493,9 +493,10 @@ def detect_many(detectors, obs) -> list[Detection]:
     Lattice detectors that differ only in their model, whose models preprocess alike and are
     all physical or all not, lay the same candidates and cut the same rectangle images: both
     are computed once (:meth:`LatticeDetector.candidates`,
-    :meth:`dlsr.detection.DenseDetector.exact_images`) and scored by each model
-    (:meth:`dlsr.detection.DenseDetector.score_images`), which gives each detector's own
-    detection bit for bit. Other detectors detect one by one.
+    :meth:`dlsr.detection.DenseDetector.exact_images`) and scored by each model, the patches
+    whitened once for the models that whiten alike (:func:`dlsr.detection.dense.
+    score_images_many`: the models of one fold), which gives each detector's own detection
+    bit for bit. Other detectors detect one by one.
 
     Parameters
     ----------
@@ -507,10 +508,10 @@ def detect_many(detectors, obs) -> list[Detection]:
     -------
     list of Detection
         One per detector, in their order. With shared work, a detection's ``seconds`` counts
-        the shared candidates and rectangle images in full (what the detector alone takes)
-        and its ``timings`` add ``shared`` (those seconds).
+        the shared candidates, rectangle images and whitening in full (what the detector alone
+        takes) and its ``timings`` add ``shared`` (the candidates' and images' seconds).
     """
-    from .dense import DenseDetector
+    from .dense import DenseDetector, score_images_many
 
     detectors = list(detectors)
     if not detectors or not _share_search(detectors):
@@ -525,13 +526,14 @@ def detect_many(detectors, obs) -> list[Detection]:
     shared = time.perf_counter() - t0
     table = None
     out = []
-    for d in detectors:
+    scores_of, scoring = score_images_many(
+        [DenseDetector(d.model, n_threads=first.n_threads) for d in detectors], images)
+    for d, exact, seconds in zip(detectors, scores_of, scoring, strict=True):
         t2 = time.perf_counter()
-        exact = DenseDetector(d.model, n_threads=d.n_threads).score_images(images)
         if d.model.physical and table is None:
             table = table_surface(obs["depth"], obs.get("depth_valid"))
         rects, scores = d._ranked(obs, cand, region, exact, table)
-        own = time.perf_counter() - t2
+        own = seconds + time.perf_counter() - t2
         out.append(Detection(rects, scores, n_candidates=len(cand),
                              n_encodings=len(cand) * PATCHES_PER_RECTANGLE,
                              seconds=shared + own,

@@ -71,3 +71,32 @@ def test_detect_many_equals_each_detector_alone(trained):
     mixed = detect_many(other, obs)
     assert "shared" not in mixed[1].timings
     np.testing.assert_array_equal(mixed[1].rects, other[1].detect(obs).rects)
+
+
+def test_the_models_of_one_fold_whiten_the_patches_once(trained, monkeypatch):
+    from dlsr.detection import dense
+
+    samples, shared, _ = trained
+    obs = sample_observation(samples[2])
+    det = shared[0].detector("lattice", complete=False)
+    cand, _, _ = det.candidates(obs)
+    images = dense.DenseDetector(shared[0], n_threads=1).exact_images(obs, cand)
+    generic = [shared[1], shared[2]]  # NKM-SC and RP-Natural: two learners, one whitening
+    np.testing.assert_array_equal(generic[0].representation.zca_matrix,
+                                  generic[1].representation.zca_matrix)
+    alone = [dense.DenseDetector(m, n_threads=1, chunk_size=400).score_images(images)
+             for m in generic]
+    calls = []
+    whitened = dense._PatchScorer.whitened
+    monkeypatch.setattr(dense._PatchScorer, "whitened",
+                        lambda self, *a: calls.append(1) or whitened(self, *a))
+    scores, seconds = dense.score_images_many(
+        [dense.DenseDetector(m, n_threads=1, chunk_size=400) for m in generic], images)
+    for s, a in zip(scores, alone, strict=True):
+        np.testing.assert_array_equal(s, a)
+    per = 400 // dense.PATCHES_PER_RECTANGLE * dense.PATCHES_PER_RECTANGLE
+    assert len(calls) == -(-len(cand) * dense.PATCHES_PER_RECTANGLE // per) > 1
+    assert all(t > 0 for t in seconds)
+    with pytest.raises(ValueError, match="chunk_size"):
+        dense.score_images_many([dense.DenseDetector(generic[0], chunk_size=400),
+                                 dense.DenseDetector(generic[1], chunk_size=800)], images)

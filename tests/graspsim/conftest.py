@@ -98,6 +98,15 @@ def pid_after():
     return pid_after
 
 
+@pytest.fixture
+def depth_source():
+    """A task for a worker: the class of a sample's depth array as the worker received it, the
+    file it maps and the sha256 of its values (from ``worker_tasks``)."""
+    from worker_tasks import depth_source
+
+    return depth_source
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)  # signal 0: only asks whether the process exists

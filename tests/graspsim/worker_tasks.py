@@ -16,3 +16,15 @@ def pid_after(seconds: float) -> int:
     """Sleep ``seconds``, then return the worker's process id."""
     time.sleep(seconds)
     return os.getpid()
+
+
+def depth_source(sample) -> tuple[str, str | None, str]:
+    """The class of a sample's depth array as the worker received it, the file it maps (None
+    for an array in memory) and the sha256 of its values (C order)."""
+    import hashlib
+
+    import numpy as np
+
+    depth = sample.depth
+    digest = hashlib.sha256(np.ascontiguousarray(depth).tobytes()).hexdigest()
+    return type(depth).__name__, getattr(depth, "filename", None), digest

@@ -15,6 +15,7 @@ Every record, model and summary is the one the separate benchmark writes, in its
 
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from pathlib import Path
@@ -24,7 +25,7 @@ from tqdm.auto import tqdm
 from dlsr.detection import train_detectors
 from dlsr.records import write_text_atomic
 
-from ...data.samples import load_samples
+from ...data.samples import load_samples, mapped_pixels
 from ...runtime.executor import Executor
 from .detection import benchmark_baselines, detect_image, finish_detection
 from .detection_plan import plan_detection
@@ -140,24 +141,24 @@ def table2_benchmark(data, format: str, out, splits=("image", "object"), rows=TA
         if split not in ("image", "object"):
             raise ValueError(f"split must be 'image' or 'object', got {split!r}")
     out = Path(out)
-    dataset = load_samples(data, format, scale, mapping)
-    extra_dataset = (None if extra_train is None else
-                     load_samples(extra_train, extra_format or format, extra_scale,
-                                  extra_mapping))
-    plans = {(row, split): plan_detection(
-        data, format, row_folder(out, *row, split), scale=scale, mapping=mapping, split=split,
-        learner=row[0], encoder=row[1], extra_train=extra_train, extra_format=extra_format,
-        extra_scale=extra_scale, extra_mapping=extra_mapping, dataset=dataset,
-        extra_dataset=extra_dataset, **options)
-        for split in splits for row in rows}
-    del dataset, extra_dataset  # the plans hold the labelled images
-    executor = Executor("sequential", progress=False) if executor is None else executor
-    t_run = time.perf_counter()
-    _train(plans, splits, rows, executor)
-    _detect(plans, splits, rows, executor, progress)
-    seconds = time.perf_counter() - t_run
-    summaries = {key: finish_detection(plan, seconds, n_overlays)
-                 for key, plan in plans.items()}
+    with contextlib.ExitStack() as stack:
+        dataset = stack.enter_context(mapped_pixels(load_samples(data, format, scale, mapping)))
+        extra_dataset = (None if extra_train is None else stack.enter_context(mapped_pixels(
+            load_samples(extra_train, extra_format or format, extra_scale, extra_mapping))))
+        plans = {(row, split): plan_detection(
+            data, format, row_folder(out, *row, split), scale=scale, mapping=mapping,
+            split=split, learner=row[0], encoder=row[1], extra_train=extra_train,
+            extra_format=extra_format, extra_scale=extra_scale, extra_mapping=extra_mapping,
+            dataset=dataset, extra_dataset=extra_dataset, **options)
+            for split in splits for row in rows}
+        del dataset, extra_dataset  # the plans hold the labelled images
+        executor = Executor("sequential", progress=False) if executor is None else executor
+        t_run = time.perf_counter()
+        _train(plans, splits, rows, executor)
+        _detect(plans, splits, rows, executor, progress)
+        seconds = time.perf_counter() - t_run
+        summaries = {key: finish_detection(plan, seconds, n_overlays)
+                     for key, plan in plans.items()}
     table = _table(out, summaries, splits, rows, seconds)
     write_text_atomic(out / "table2.json", json.dumps(table, indent=2))
     write_text_atomic(out / "table2.md", table2_rows_markdown(table))
