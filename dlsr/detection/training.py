@@ -278,6 +278,7 @@ def train_detector(
     random_state=0,
     data=None,
     representation=None,
+    features=None,
     **config,
 ) -> DLSRDetector:
     """Train the recognition model on the labelled rectangles of ``samples``.
@@ -339,6 +340,10 @@ def train_detector(
         The representation of ``learner`` already fitted on ``data`` with these
         ``n_atoms``, ``whiten``, ``n_patches``, ``extra_patches`` and ``random_state``
         (skips its fit; :func:`train_detectors` shares one between models of one learner).
+    features : ndarray of shape (n, k), float32, or None
+        The features of ``data``'s rectangles under ``representation`` and this encoder
+        (:func:`dlsr.features.rectangle_features`), already computed; only with ``data`` and
+        ``representation`` (:func:`train_detectors` computes every model's in one pass).
     **config :
         Detector options stored in the model (``detector``, ``grid`` (dict), ``top_k``,
         ``rescore``, ``region``).
@@ -347,14 +352,15 @@ def train_detector(
     -------
     DLSRDetector
     """
-    from ..features import ENCODER_GRIDS, ENCODERS, fit_representation
+    from ..features import ENCODERS, fit_representation
     from ..svm import FeatureStandardizer, SquaredHingeSVC
 
     if encoder not in ENCODERS:
         raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
-    if encoder_param is None and encoder != "Natural":
-        grid = ENCODER_GRIDS[encoder]
-        encoder_param = grid[len(grid) // 2 - 1]
+    encoder_param = _resolved_param(encoder, encoder_param)
+    if features is not None and (data is None or representation is None):
+        raise ValueError("features are only given with the data and the representation "
+                         "they come from")
     check_training_options(fit_grid, hard_negatives, hard_rounds, physical)
     if physical:
         _check_physical_options(samples, physical_weight, physical_bins)
@@ -372,8 +378,14 @@ def train_detector(
     else:
         rep = representation
     polarity = not (learner == "NKM" and encoder == "Natural")
-    F = rectangle_features(data.images, data.masks, rep, encoder, encoder_param,
-                           polarity=polarity)
+    if features is None:
+        F = rectangle_features(data.images, data.masks, rep, encoder, encoder_param,
+                               polarity=polarity)
+    else:
+        F = np.asarray(features)
+        if F.shape[0] != len(data.labels):
+            raise ValueError(f"features for {F.shape[0]} rectangles, the data has "
+                             f"{len(data.labels)}")
     labels = np.asarray(data.labels)
     n_hard = 0
     k = F.shape[1]
@@ -486,6 +498,17 @@ def _training_grid(samples, config: dict, fit_grid) -> SearchGrid:
     return sgrid
 
 
+def _resolved_param(encoder: str, encoder_param):
+    """``encoder_param``, or the middle of the encoder's reference grid when None (Natural
+    keeps None)."""
+    from ..features import ENCODER_GRIDS
+
+    if encoder_param is None and encoder != "Natural" and encoder in ENCODER_GRIDS:
+        grid = ENCODER_GRIDS[encoder]
+        return grid[len(grid) // 2 - 1]
+    return encoder_param
+
+
 def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDetector]:
     """Several detectors trained on the same images, the work they share done once.
 
@@ -510,17 +533,23 @@ def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDete
     -------
     list of DLSRDetector
         In the order of ``models``. Each model's ``config["train_seconds"]`` counts the shared
-        work in full (what it takes alone), ``config["shared_train_seconds"]`` says how
-        much of it was shared and ``config["training_data_seconds"]`` how much of that the
-        training rectangles took (the rest is the representation).
+        training rectangles and representation in full (what it takes alone) and its even
+        share of the features' pass (every model's features are computed in one pass, the
+        patches whitened once: :func:`dlsr.features.rectangle_features_many`);
+        ``config["shared_train_seconds"]`` says how much of it was shared and
+        ``config["training_data_seconds"]`` how much of that the training rectangles took.
     """
-    from ..features import fit_representation
+    from ..features import ENCODERS, LEARNERS, fit_representation, rectangle_features_many
 
     own = {"learner", "encoder", "encoder_param", "C"}
     for m in models:
         if not {"learner", "encoder"} <= m.keys() or not m.keys() <= own:
             raise ValueError(f"each model needs 'learner' and 'encoder' (and optionally "
                              f"'encoder_param', 'C'), got {sorted(m)}")
+        if m["encoder"] not in ENCODERS:
+            raise ValueError(f"unknown encoder {m['encoder']!r}; choose from {ENCODERS}")
+        if m["learner"] not in LEARNERS:
+            raise ValueError(f"unknown learner {m['learner']!r}; choose from {LEARNERS}")
     if own & options.keys() or "data" in options or "representation" in options:
         raise ValueError("learner, encoder, encoder_param, C, data and representation are "
                          "per model or shared here, not options")
@@ -544,11 +573,18 @@ def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDete
             data.images, data.masks, learner, n_atoms=opt("n_atoms"), whiten=opt("whiten"),
             n_patches=opt("n_patches"), extra=opt("extra_patches"), random_state=random_state)
         shared[learner] = time.perf_counter() - t1
+    # every model's features in one pass: the patches whitened once for the models that
+    # whiten alike (all of them here: one training set, one seed)
+    t1 = time.perf_counter()
+    features = rectangle_features_many(data.images, data.masks, [
+        (reps[m["learner"]], m["encoder"], _resolved_param(m["encoder"], m.get("encoder_param")),
+         not (m["learner"] == "NKM" and m["encoder"] == "Natural")) for m in models])
+    shared["features"] = (time.perf_counter() - t1) / len(models)
     out = []
-    for m in models:
+    for m, F in zip(models, features, strict=True):
         model = train_detector(samples, **m, **options, random_state=random_state, data=data,
-                               representation=reps[m["learner"]])
-        extra_s = shared["data"] + shared[m["learner"]]
+                               representation=reps[m["learner"]], features=F)
+        extra_s = shared["data"] + shared[m["learner"]] + shared["features"]
         model.config["train_seconds"] += extra_s
         model.config["shared_train_seconds"] = extra_s
         model.config["training_data_seconds"] = shared["data"]

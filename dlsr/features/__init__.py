@@ -32,6 +32,7 @@ from .pooling import (
     quadrant_pool,
     rectangle_features,
     rectangle_features_grid,
+    rectangle_features_many,
     rectangle_features_multi,
 )
 from .representation import Representation, fit_representation
@@ -50,6 +51,7 @@ __all__ = [
     "encode_patches_multi",
     "rectangle_features",
     "rectangle_features_grid",
+    "rectangle_features_many",
     "rectangle_features_multi",
     "DLSRFeatures",
 ]

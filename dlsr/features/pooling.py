@@ -94,6 +94,57 @@ def rectangle_features_multi(
         Encoders that read the same codes (SC-Natural and SC at the dictionary's penalty, for
         example) share the same array object, written once.
     """
+    return _features_of(images, masks, [(rep, grids, polarity)], chunk_size, cpu_seconds,
+                        rows)[0]
+
+
+def rectangle_features_many(images, masks, models, chunk_size: int = 64) -> list[np.ndarray]:
+    """:func:`rectangle_features` of the same rectangles under several models, the patches
+    extracted once and standardised and whitened once for the models that whiten alike.
+
+    The representations of one training set drawn from one seed whiten alike whatever their
+    learner (they sample the same patches): a detector's models (NKM, OMP and RP in the paper's
+    Table 2) then read the same whitened patches, and each model's features are the ones
+    :func:`rectangle_features` gives it alone, bit for bit.
+
+    Parameters
+    ----------
+    images, masks : ndarray of shape (n, 24, 24, 8)
+    models : sequence of tuple
+        ``(rep, encoder, param, polarity)`` per model (see :func:`rectangle_features`).
+    chunk_size : int
+
+    Returns
+    -------
+    list of ndarray of shape (n, 4 * k), float32
+        One per model, in their order.
+    """
+    jobs = [(rep, {encoder: [param]}, polarity) for rep, encoder, param, polarity in models]
+    out = _features_of(images, masks, jobs, chunk_size, None, None)
+    return [o[next(iter(grids))][0] for o, (_, grids, _) in zip(out, jobs, strict=True)]
+
+
+def _whitening_groups(reps) -> list[list[int]]:
+    """Positions of ``reps`` grouped by their whitening (equal mean and matrix, or none)."""
+    groups: list[list[int]] = []
+    for i, rep in enumerate(reps):
+        for g in groups:
+            first = reps[g[0]]
+            if first is rep or (
+                    (first.zca_matrix is None) == (rep.zca_matrix is None)
+                    and (rep.zca_matrix is None
+                         or (np.array_equal(first.zca_matrix, rep.zca_matrix)
+                             and np.array_equal(first.zca_mean, rep.zca_mean)))):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    return groups
+
+
+def _features_of(images, masks, jobs, chunk_size, cpu_seconds, rows) -> list[dict]:
+    """Per job ``(rep, grids, polarity)``, :func:`rectangle_features_multi`'s dict; the
+    patches extracted once per chunk and preprocessed once per whitening."""
     images = np.asarray(images, dtype=np.float32)
     masks = np.asarray(masks, dtype=bool)
     if masks.shape != images.shape:
@@ -102,45 +153,58 @@ def rectangle_features_multi(
     n = len(images) if rows is None else len(rows)
     if n == 0:
         raise ValueError("no rectangles to featurise")
-    for enc, params in grids.items():
-        if not list(params):
-            raise ValueError(f"params of {enc!r} must hold at least one encoder parameter")
+    for _, grids, _ in jobs:
+        for enc, params in grids.items():
+            if not list(params):
+                raise ValueError(f"params of {enc!r} must hold at least one encoder parameter")
     acc = cpu_seconds if cpu_seconds is not None else {}
-    plans, needed = code_plans(rep, grids)
+    planned = [code_plans(rep, grids) for rep, grids, _ in jobs]
+    groups = _whitening_groups([rep for rep, _, _ in jobs])
+    outs: list = [None] * len(jobs)
+    arrays: list = [None] * len(jobs)
     # see dlsr.memory: freshly faulted pages (huge or not) cost more than they save
     with small_pages(), reused_heap():
-        out = None
         for start in range(0, n, chunk_size):
             c0 = time.process_time()
             stop = start + chunk_size
             sel = slice(start, stop) if rows is None else rows[start:stop]
             P, PM = patches.extract_patches(images[sel], masks[sel], PATCH_SIZE)
             b, g, p = P.shape
-            Xp = preprocess_patches(P.reshape(b * g, p), PM.reshape(b * g, p),
-                                     (rep.zca_mean, rep.zca_matrix))
+            M = PM.reshape(b * g, p)
             acc["patches"] = acc.get("patches", 0.0) + time.process_time() - c0
             side = int(round(np.sqrt(g)))
-            pooled: dict = {}
-            # each computation's codes pooled as soon as they are done, then dropped: a chunk
-            # never holds every computation's codes at once
-            for done in iter_codes(Xp, PM.reshape(b * g, p), rep, needed, acc):
+            for group in groups:
                 c0 = time.process_time()
-                for keys in plans.values():
-                    for key in keys:
-                        if key not in pooled and key[:3] in done:
-                            pooled[key] = split_pool(done[key[:3]].reshape(b, side, side, -1),
-                                                      bool(polarity and key[3]))
-                del done
-                acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
-            c0 = time.process_time()
-            if out is None:  # encoders reading the same codes share one array
-                arrays = {key: np.empty((n, pooled[key].shape[1]), dtype=np.float32)
-                          for key in pooled}
-                out = {enc: [arrays[key] for key in keys] for enc, keys in plans.items()}
-            for key, pooled_key in pooled.items():
-                arrays[key][start:start + b] = pooled_key
-            acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
-    return out
+                first = jobs[group[0]][0]
+                Xp = preprocess_patches(P.reshape(b * g, p), M,
+                                        (first.zca_mean, first.zca_matrix))
+                acc["patches"] = acc.get("patches", 0.0) + time.process_time() - c0
+                for j in group:
+                    rep, _, polarity = jobs[j]
+                    plans, needed = planned[j]
+                    pooled: dict = {}
+                    # each computation's codes pooled as soon as they are done, then dropped:
+                    # a chunk never holds every computation's codes at once
+                    for done in iter_codes(Xp, M, rep, needed, acc):
+                        c0 = time.process_time()
+                        for keys in plans.values():
+                            for key in keys:
+                                if key not in pooled and key[:3] in done:
+                                    pooled[key] = split_pool(
+                                        done[key[:3]].reshape(b, side, side, -1),
+                                        bool(polarity and key[3]))
+                        del done
+                        acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
+                    c0 = time.process_time()
+                    if outs[j] is None:  # encoders reading the same codes share one array
+                        arrays[j] = {key: np.empty((n, pooled[key].shape[1]), dtype=np.float32)
+                                     for key in pooled}
+                        outs[j] = {enc: [arrays[j][key] for key in keys]
+                                   for enc, keys in plans.items()}
+                    for key, pooled_key in pooled.items():
+                        arrays[j][key][start:start + b] = pooled_key
+                    acc["pooling"] = acc.get("pooling", 0.0) + time.process_time() - c0
+    return outs
 
 
 def rectangle_features_grid(

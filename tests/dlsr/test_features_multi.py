@@ -179,3 +179,33 @@ def test_a_chunk_never_holds_every_computations_codes_at_once():
     every, lasso = peak(ENCODERS), peak(("SC", "mSC"))
     assert lasso > 10 * n * 361 * 300 * 4  # the two lasso runs' codes and work are measured
     assert every < 1.1 * lasso, every / lasso
+
+
+def test_rectangle_features_many_whitens_once_per_whitening(monkeypatch):
+    from dlsr.features import pooling, rectangle_features, rectangle_features_many
+
+    rng = np.random.default_rng(6)
+    images = rng.standard_normal((5, 24, 24, 8)).astype(np.float32)
+    masks = rng.random((5, 24, 24, 8)) > 0.1
+    masks[:, :, 21:] = False  # padding columns
+    A = rng.standard_normal((P, P)) * 0.05 + np.eye(P)
+    mean = rng.standard_normal(P) * 0.1
+    D = rng.standard_normal((12, P))
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    one = Representation("RP", D, None, mean, A, None)
+    same = Representation("NKM", D[::-1].copy(), 1.5 * D[::-1], mean.copy(), A.copy(), None)
+    other = Representation("RP", D, None, mean, A + 0.01, None)  # another whitening
+    models = [(one, "SC", 1.0, True), (same, "Natural", None, False),
+              (other, "Natural", None, True), (one, "OMP", 3, True)]
+    alone = [rectangle_features(images, masks, rep, enc, param, polarity, chunk_size=2)
+             for rep, enc, param, polarity in models]
+    calls = []
+    whiten = pooling.preprocess_patches
+    monkeypatch.setattr(pooling, "preprocess_patches",
+                        lambda *a: calls.append(a[2][1]) or whiten(*a))
+    many = rectangle_features_many(images, masks, models, chunk_size=2)
+    for a, b in zip(many, alone, strict=True):
+        np.testing.assert_array_equal(a, b)
+    # 3 chunks, two whitenings: 6 preprocessings, not 12
+    assert len(calls) == 6
+    assert sum(c is other.zca_matrix for c in calls) == 3
