@@ -422,7 +422,7 @@ def _map(pool, fn, items) -> list:
     return list(pool.map(fn, items))
 
 
-def score_images_many(detectors, images) -> list[np.ndarray]:
+def score_images_many(detectors, images) -> tuple[list[np.ndarray], list[float]]:
     """Each detector's :meth:`DenseDetector.score_images` of the same rectangle images, the
     patches whitened once for the models that whiten alike.
 
