@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from ..features import encode_patches
+from ..features.representation import whitening_groups
 from ..preprocess import _one_blas_thread
 from ..rectangles import corners_from_array, normalize_angle
 from .exact import Detection, _Base, _check_obs, _empty
@@ -358,15 +359,6 @@ class _PatchScorer:
             X *= M
         return X, M
 
-    def shares_whitening(self, other) -> bool:
-        """Whether :meth:`whitened` gives ``other``'s patches bit for bit (the same whitening
-        or none for both): the models of one fold whiten alike whatever their learner, since
-        their representations draw the same patches from the same seed."""
-        if self.whiten != other.whiten:
-            return False
-        return not self.whiten or (np.array_equal(self.P, other.P)
-                                   and np.array_equal(self.mP, other.mP))
-
     def encoded_scores(self, X, M) -> np.ndarray:
         """``(n, q)`` scores of whitened patches ``X`` with masks ``M`` (:meth:`whitened`),
         through the model's encoder; ``X`` and ``M`` are only read."""
@@ -466,19 +458,12 @@ def _scores_of_images(detectors, images, pool):
     weights = [d.model.quadrant_weights() for d in detectors]
     scorers = [_PatchScorer(d.model, V, by_rows=True)
                for d, (V, _) in zip(detectors, weights, strict=True)]
-    # groups of generic scorers that whiten alike: one whitening per group and chunk
-    groups: list[list[int]] = []
-    for i, sc in enumerate(scorers):
-        if sc.triangle:
-            groups.append([i])
-            continue
-        for g in groups:
-            first = scorers[g[0]]
-            if not first.triangle and first.shares_whitening(sc):
-                g.append(i)
-                break
-        else:
-            groups.append([i])
+    # the generic scorers grouped by their whitening: one whitening per group and chunk (the
+    # triangle codes have their own fused products)
+    generic = [i for i, sc in enumerate(scorers) if not sc.triangle]
+    groups = [[i] for i, sc in enumerate(scorers) if sc.triangle]
+    groups += [[generic[j] for j in g] for g in
+               whitening_groups([detectors[i].model.representation for i in generic])]
     per = max(1, detectors[0].chunk_size // PATCHES_PER_RECTANGLE) * PATCHES_PER_RECTANGLE
     spans = [(s, min(s + per, len(rows))) for s in range(0, len(rows), per)]
 

@@ -352,12 +352,10 @@ def train_detector(
     -------
     DLSRDetector
     """
-    from ..features import ENCODERS, fit_representation
+    from ..features import default_encoder_param, fit_representation
     from ..svm import FeatureStandardizer, SquaredHingeSVC
 
-    if encoder not in ENCODERS:
-        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
-    encoder_param = _resolved_param(encoder, encoder_param)
+    encoder_param = default_encoder_param(encoder, encoder_param)
     if features is not None and (data is None or representation is None):
         raise ValueError("features are only given with the data and the representation "
                          "they come from")
@@ -498,17 +496,6 @@ def _training_grid(samples, config: dict, fit_grid) -> SearchGrid:
     return sgrid
 
 
-def _resolved_param(encoder: str, encoder_param):
-    """``encoder_param``, or the middle of the encoder's reference grid when None (Natural
-    keeps None)."""
-    from ..features import ENCODER_GRIDS
-
-    if encoder_param is None and encoder != "Natural" and encoder in ENCODER_GRIDS:
-        grid = ENCODER_GRIDS[encoder]
-        return grid[len(grid) // 2 - 1]
-    return encoder_param
-
-
 def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDetector]:
     """Several detectors trained on the same images, the work they share done once.
 
@@ -539,15 +526,19 @@ def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDete
         ``config["shared_train_seconds"]`` says how much of it was shared and
         ``config["training_data_seconds"]`` how much of that the training rectangles took.
     """
-    from ..features import ENCODERS, LEARNERS, fit_representation, rectangle_features_many
+    from ..features import (
+        LEARNERS,
+        default_encoder_param,
+        fit_representation,
+        rectangle_features_many,
+    )
 
     own = {"learner", "encoder", "encoder_param", "C"}
     for m in models:
         if not {"learner", "encoder"} <= m.keys() or not m.keys() <= own:
             raise ValueError(f"each model needs 'learner' and 'encoder' (and optionally "
                              f"'encoder_param', 'C'), got {sorted(m)}")
-        if m["encoder"] not in ENCODERS:
-            raise ValueError(f"unknown encoder {m['encoder']!r}; choose from {ENCODERS}")
+        default_encoder_param(m["encoder"])  # an unknown encoder is refused here
         if m["learner"] not in LEARNERS:
             raise ValueError(f"unknown learner {m['learner']!r}; choose from {LEARNERS}")
     if own & options.keys() or "data" in options or "representation" in options:
@@ -577,7 +568,8 @@ def train_detectors(samples, models, random_state=0, **options) -> list[DLSRDete
     # whiten alike (all of them here: one training set, one seed)
     t1 = time.perf_counter()
     features = rectangle_features_many(data.images, data.masks, [
-        (reps[m["learner"]], m["encoder"], _resolved_param(m["encoder"], m.get("encoder_param")),
+        (reps[m["learner"]], m["encoder"], default_encoder_param(m["encoder"],
+                                                                  m.get("encoder_param")),
          not (m["learner"] == "NKM" and m["encoder"] == "Natural")) for m in models])
     shared["features"] = (time.perf_counter() - t1) / len(models)
     out = []

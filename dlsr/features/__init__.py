@@ -25,7 +25,7 @@ The package, one concept per module:
 
 from __future__ import annotations
 
-from .base import ENCODER_GRIDS, ENCODERS, LEARNERS
+from .base import ENCODER_GRIDS, ENCODERS, LEARNERS, default_encoder_param
 from .encoding import encode_patches, encode_patches_grid, encode_patches_multi
 from .estimator import DLSRFeatures, pack_images, unpack_images
 from .pooling import (
@@ -41,6 +41,7 @@ __all__ = [
     "LEARNERS",
     "ENCODERS",
     "ENCODER_GRIDS",
+    "default_encoder_param",
     "pack_images",
     "unpack_images",
     "quadrant_pool",

@@ -4,7 +4,7 @@ encoders' inner-CV grids, and the sizes of rectangle images, patches and pooling
 from __future__ import annotations
 
 __all__ = ["LEARNERS", "ENCODERS", "ENCODER_GRIDS", "IMAGE_SIZE", "N_CHANNELS", "PATCH_SIZE",
-           "POOL_SPLIT"]
+           "POOL_SPLIT", "default_encoder_param"]
 
 LEARNERS = ("SC", "OMP", "GSVQ", "NKM", "RP", "R")
 # Encoders in the column order of the paper's Table 1.
@@ -23,3 +23,14 @@ IMAGE_SIZE = 24
 N_CHANNELS = 8
 PATCH_SIZE = 6
 POOL_SPLIT = 10
+
+
+def default_encoder_param(encoder: str, param=None):
+    """``param``, or when None the middle of ``encoder``'s grid (its second value of four);
+    Natural keeps None (its parameter is the dictionary's)."""
+    if encoder not in ENCODERS:
+        raise ValueError(f"unknown encoder {encoder!r}; choose from {ENCODERS}")
+    if param is not None or encoder == "Natural":
+        return param
+    grid = ENCODER_GRIDS[encoder]
+    return grid[len(grid) // 2 - 1]

@@ -7,7 +7,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.utils.validation import check_is_fitted, validate_data
 
-from .base import ENCODER_GRIDS, ENCODERS, IMAGE_SIZE, N_CHANNELS
+from .base import IMAGE_SIZE, N_CHANNELS, default_encoder_param
 from .pooling import rectangle_features
 from .representation import fit_representation
 
@@ -108,12 +108,7 @@ class DLSRFeatures(TransformerMixin, BaseEstimator):
         self.random_state = random_state
 
     def _param(self):
-        if self.encoder not in ENCODERS:
-            raise ValueError(f"unknown encoder {self.encoder!r}; choose from {ENCODERS}")
-        if self.encoder_param is not None or self.encoder == "Natural":
-            return self.encoder_param
-        grid = ENCODER_GRIDS[self.encoder]
-        return grid[len(grid) // 2 - 1]
+        return default_encoder_param(self.encoder, self.encoder_param)
 
     def fit(self, X, y=None):
         X = validate_data(self, X, dtype=np.float32)

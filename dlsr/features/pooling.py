@@ -12,7 +12,7 @@ from .. import patches
 from ..memory import reused_heap, small_pages
 from .base import PATCH_SIZE, POOL_SPLIT
 from .encoding import code_plans, iter_codes
-from .representation import Representation, preprocess_patches
+from .representation import Representation, preprocess_patches, whitening_groups
 
 __all__ = ["quadrant_pool", "split_pool", "rectangle_features", "rectangle_features_grid",
            "rectangle_features_multi"]
@@ -124,24 +124,6 @@ def rectangle_features_many(images, masks, models, chunk_size: int = 64) -> list
     return [o[next(iter(grids))][0] for o, (_, grids, _) in zip(out, jobs, strict=True)]
 
 
-def _whitening_groups(reps) -> list[list[int]]:
-    """Positions of ``reps`` grouped by their whitening (equal mean and matrix, or none)."""
-    groups: list[list[int]] = []
-    for i, rep in enumerate(reps):
-        for g in groups:
-            first = reps[g[0]]
-            if first is rep or (
-                    (first.zca_matrix is None) == (rep.zca_matrix is None)
-                    and (rep.zca_matrix is None
-                         or (np.array_equal(first.zca_matrix, rep.zca_matrix)
-                             and np.array_equal(first.zca_mean, rep.zca_mean)))):
-                g.append(i)
-                break
-        else:
-            groups.append([i])
-    return groups
-
-
 def _features_of(images, masks, jobs, chunk_size, cpu_seconds, rows) -> list[dict]:
     """Per job ``(rep, grids, polarity)``, :func:`rectangle_features_multi`'s dict; the
     patches extracted once per chunk and preprocessed once per whitening."""
@@ -159,7 +141,7 @@ def _features_of(images, masks, jobs, chunk_size, cpu_seconds, rows) -> list[dic
                 raise ValueError(f"params of {enc!r} must hold at least one encoder parameter")
     acc = cpu_seconds if cpu_seconds is not None else {}
     planned = [code_plans(rep, grids) for rep, grids, _ in jobs]
-    groups = _whitening_groups([rep for rep, _, _ in jobs])
+    groups = whitening_groups([rep for rep, _, _ in jobs])
     outs: list = [None] * len(jobs)
     arrays: list = [None] * len(jobs)
     # see dlsr.memory: freshly faulted pages (huge or not) cost more than they save

@@ -13,7 +13,7 @@ from sklearn.utils import check_random_state
 from .. import dictionaries, patches, whitening
 from .base import LEARNERS
 
-__all__ = ["Representation", "fit_representation", "preprocess_patches"]
+__all__ = ["Representation", "fit_representation", "preprocess_patches", "whitening_groups"]
 
 
 @dataclass
@@ -165,3 +165,27 @@ def fit_representation(
     else:
         D = learned
     return Representation(learner, np.asarray(D, np.float32), centroids, mean, P, natural_param)
+
+
+def whitening_groups(reps) -> list[list[int]]:
+    """Positions of ``reps`` grouped by their whitening: equal ZCA mean and matrix, or none for
+    all of a group; groups in order of their first member.
+
+    The representations of one training set drawn from one seed whiten alike whatever their
+    learner (they sample the same patches), so a patch whitened for one of a group is
+    whitened for all of them, bit for bit.
+    """
+    groups: list[list[int]] = []
+    for i, rep in enumerate(reps):
+        for g in groups:
+            first = reps[g[0]]
+            if first is rep or (
+                    (first.zca_matrix is None) == (rep.zca_matrix is None)
+                    and (rep.zca_matrix is None
+                         or (np.array_equal(first.zca_matrix, rep.zca_matrix)
+                             and np.array_equal(first.zca_mean, rep.zca_mean)))):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    return groups

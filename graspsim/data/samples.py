@@ -91,7 +91,4 @@ def mapped_pixels(samples, folder=None):
             name: np.memmap(path, dtype=dtype, mode="r", offset=off, shape=shape)
             for name, (off, dtype, shape) in where.items()})
             for s, where in zip(samples, layout, strict=True)]
-        try:
-            yield mapped
-        finally:
-            del mapped
+        yield mapped
