@@ -28,3 +28,24 @@ def blas_threads() -> int:
     """Threads BLAS may use now (1 when no BLAS library is loaded)."""
     return max([lib.num_threads for lib in controller().lib_controllers
                 if lib.user_api == "blas"] or [1])
+
+
+def thread_budget() -> int:
+    """Threads this process should run its own work in: the CPUs it may run on, capped by the
+    ``OMP_NUM_THREADS`` environment variable when that is a positive integer.
+
+    A process that shares the machine with other workers of the same job is given its share of
+    the cores that way: joblib's loky workers get ``cpu_count() // n_jobs`` (its
+    ``inner_max_num_threads`` default), Ray's tasks their ``num_cpus``. Threads beyond that
+    share compete with the other workers for the same cores.
+    """
+    import os
+
+    try:
+        n = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        n = os.cpu_count() or 1
+    cap = os.environ.get("OMP_NUM_THREADS", "").strip()
+    if cap.isdigit() and int(cap) > 0:
+        n = min(n, int(cap))
+    return max(1, n)

@@ -8,7 +8,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-import os
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -16,6 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 import cv2
 import numpy as np
 
+from .._threads import thread_budget
 from ..features import encode_patches
 from ..features.representation import whitening_groups
 from ..preprocess import _one_blas_thread
@@ -573,8 +573,10 @@ class DenseDetector(_Base):
         invalid pixels are masked), so the cheap ``"nearest"`` is the default; None uses the
         model's preprocessing choice (the exact path's, ``"band"``).
     n_threads : int or None
-        Threads for the (angle, opening) canvases and the rescoring; None: the CPUs available
-        to the process. BLAS runs single-threaded inside (each thread does whole products).
+        Threads for the (angle, opening) canvases and the rescoring; None: the process's
+        share of the cores (:func:`dlsr._threads.thread_budget`: the CPUs available to it,
+        one in each of two loky workers on two cores). BLAS runs single-threaded inside (each
+        thread does whole products).
     colour_whitening : bool
         Whiten a canvas patch without any valid depth on its colour entries only
         (:class:`_PatchScorer`'s ``colour_only``; in a pile about 45 % of the patches have
@@ -728,10 +730,7 @@ class DenseDetector(_Base):
     def _threads(self) -> int:
         if self.n_threads is not None:
             return max(1, int(self.n_threads))
-        try:
-            return max(1, len(os.sched_getaffinity(0)))
-        except AttributeError:  # not on Linux
-            return max(1, os.cpu_count() or 1)
+        return thread_budget()
 
     def _pool(self):
         n = self._threads()

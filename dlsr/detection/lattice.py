@@ -395,7 +395,8 @@ class LatticeDetector:
         Also the widest opening within the reach where a chord's wide opening is beyond it
         (:func:`lattice_candidates`; not the default, README).
     n_threads : int or None
-        Threads of the exact scoring (None: the CPUs available).
+        Threads of the exact scoring (None: the process's share of the cores, as
+        :class:`~dlsr.detection.dense.DenseDetector`).
     """
 
     def __init__(self, model, top_k: int = 5, region: str = "auto", background=None,
