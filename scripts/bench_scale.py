@@ -29,7 +29,8 @@ after: a measurement beside other work, or of older code, says so (one entry per
 command took several runs). ``growth`` gives, per table and stage, the exponent ``k``
 of a least-squares fit of ``time = a * size^k`` over the sizes measured, and ``projected`` the
 fit's ``wall_s`` and ``cpu_s`` at Cornell's 885 images when that size was not measured (a
-projection, not a measurement).
+projection, not a measurement). ``per_cell`` gives, per size, what each cell of Table 1 and
+each row of Table 2 would cost alone (:func:`per_cell`).
 
 The stand-in is always Cornell's size (``--standin-images``), so a size means the same
 images whichever sizes a run asks for; each size's record names its data (``data``: the
@@ -285,6 +286,56 @@ def table2_detector(out: Path) -> dict:
     return {k: cfg.get(k) for k in ("detector", "options", "rescore", "coarse_to_fine")}
 
 
+def per_cell(out: Path, size: int) -> dict:
+    """What one cell or row would cost alone at ``size`` images, in worker-seconds, from the
+    commands' own records (what a user running only that cell pays; the table shares work
+    between cells, so these do not add up to the table).
+
+    Table 1 (``recognition.json``): a cell's learner's representation (patches, whitening and
+    dictionary of the five outer folds, recorded on the first cell of that learner) plus the
+    cell's own coding and SVM (inner cross-validation and refit). Table 2 (each row's
+    ``models/*.json`` and ``detection.json``): the row's five fold models' ``train_seconds``
+    (the work shared with the other rows counted in full) plus its seconds per test image times
+    the images. ``two_workers_min``: the worker-seconds over two workers, in minutes.
+    """
+    cells: dict = {}
+    rec_path = out / f"table1_{size}" / "recognition.json"
+    if rec_path.is_file():
+        rec = json.loads(rec_path.read_text())
+        rep: dict = {}
+        for cell in rec["cells"]:
+            stages = cell.get("representation_stages") or {}
+            # recorded on the cell that built it (once more if a resumed run rebuilt it)
+            rep[cell["learner"]] = max(rep.get(cell["learner"], 0.0), sum(stages.values()))
+        table1 = {}
+        for cell in rec["cells"]:
+            coding = sum(f.get("coding_seconds", 0.0) for f in cell["folds"])
+            svm = sum(f.get("svm_seconds", 0.0) for f in cell["folds"])
+            total = rep[cell["learner"]] + coding + svm
+            table1[f"{cell['learner']}-{cell['encoder']}"] = {
+                "representation_s": round(rep[cell["learner"]], 1), "coding_s": round(coding, 1),
+                "svm_s": round(svm, 1), "worker_s": round(total, 1),
+                "two_workers_min": round(total / 2 / 60, 1)}
+        cells["table1"] = table1
+    table2 = {}
+    for learner, encoder in TABLE2_ROWS:
+        for split in ("image", "object"):
+            folder = out / f"table2_{size}" / f"{learner}-{encoder}_{split}"
+            if not (folder / "detection.json").is_file():
+                continue
+            det = json.loads((folder / "detection.json").read_text())
+            train = sum(json.loads(f.read_text())["config"].get("train_seconds", 0.0)
+                        for f in sorted((folder / "models").glob("*.json")))
+            detect = det["seconds_per_image"] * len(det["per_image"])
+            table2[f"{learner}-{encoder} {split}"] = {
+                "train_s": round(train, 1), "detection_s": round(detect, 1),
+                "worker_s": round(train + detect, 1),
+                "two_workers_min": round((train + detect) / 2 / 60, 1)}
+    if table2:
+        cells["table2"] = table2
+    return cells
+
+
 def growth(rows: dict) -> dict:
     """Per table and stage, the exponent k of time = a * size^k (least squares in log-log)."""
     out: dict = {}
@@ -424,7 +475,8 @@ def _run(args) -> int:
                           "platform": sys.platform},
               "standin": made["reached"], "sizes": {s: timings[str(s)] for s in map(str, sizes)},
               "growth": growth({s: timings[s] for s in map(str, sizes)}),
-              "projected": projected({s: timings[s] for s in map(str, sizes)})}
+              "projected": projected({s: timings[s] for s in map(str, sizes)}),
+              "per_cell": {s: per_cell(out, s) for s in sizes}}
     print(json.dumps(result, indent=1))
     return 0
 

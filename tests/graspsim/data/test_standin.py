@@ -213,7 +213,6 @@ def test_bench_scale_timing_names_the_code_and_the_load_it_ran_beside(tmp_path, 
 def test_bench_scale_tree_memory_counts_shared_pages_once_in_its_pss():
     import subprocess
     import sys
-    import time
     from pathlib import Path
 
     if not Path("/proc/self/smaps_rollup").exists():
@@ -221,15 +220,18 @@ def test_bench_scale_tree_memory_counts_shared_pages_once_in_its_pss():
     bench = _bench_scale()
     # a child that maps 200 MB of anonymous shared memory and writes it, then forks, and both
     # read every page: the two processes hold the same pages, which their resident sets count
-    # twice
-    code = ("import mmap, os, time; m = mmap.mmap(-1, 200 << 20); m.write(b'x' * (200 << 20));"
-            " os.fork(); m[::4096]; time.sleep(3)")
-    proc = subprocess.Popen([sys.executable, "-c", code])
+    # twice. Each says when its pages are in; both end when their input closes.
+    code = ("import mmap, os, sys; m = mmap.mmap(-1, 200 << 20); m.write(b'x' * (200 << 20));"
+            " os.fork(); m[::4096]; print('ready', flush=True); sys.stdin.read()")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
     try:
-        time.sleep(1.5)
+        assert [proc.stdout.readline() for _ in range(2)] == ["ready\n"] * 2
         rss, pss, ticks = bench._tree(proc.pid)
     finally:
+        proc.stdin.close()
         proc.wait()
+        proc.stdout.close()
     assert len(ticks) == 2  # the child and its fork
     assert rss > 400 and pss < rss - 150, (rss, pss)
     assert pss > 200
@@ -304,3 +306,36 @@ def test_bench_scale_size_stopped_in_its_first_command_continues_it(tmp_path, mo
     assert (out / "table1_100" / "cells.jsonl").exists()  # its saved cells were kept
     t = json.loads((out / "timings.json").read_text())["100"]["table1"]
     assert t["segments"] == 2 and t["wall_s"] == 15.0
+
+
+def test_bench_scale_per_cell_costs_count_the_shared_representation_in_each_cell(tmp_path):
+    bench = _bench_scale()
+    t1 = tmp_path / "table1_50"
+    t1.mkdir()
+    fold = {"coding_seconds": 3.0, "svm_seconds": 1.0}
+    cells = [{"learner": "NKM", "encoder": "SC", "folds": [fold] * 5,
+              "representation_stages": {"patches": 1.0, "whitening": 2.0, "dictionary": 57.0}},
+             {"learner": "NKM", "encoder": "ST", "folds": [{"coding_seconds": 0.5,
+                                                          "svm_seconds": 2.0}] * 5,
+              "representation_stages": {}},
+             {"learner": "RP", "encoder": "Natural", "folds": [fold] * 5,
+              "representation_stages": {"dictionary": 0.5}}]
+    (t1 / "recognition.json").write_text(json.dumps({"cells": cells}))
+    row = tmp_path / "table2_50" / "NKM-SC_image"
+    (row / "models").mkdir(parents=True)
+    for k in range(5):
+        (row / "models" / f"abc_fold{k}.json").write_text(
+            json.dumps({"config": {"train_seconds": 10.0 + k}}))
+    (row / "detection.json").write_text(json.dumps({"seconds_per_image": 2.5,
+                                                    "per_image": [{}] * 50}))
+    costs = bench.per_cell(tmp_path, 50)
+    nkm_sc, nkm_st = costs["table1"]["NKM-SC"], costs["table1"]["NKM-ST"]
+    # the NKM representation, recorded on the first NKM cell, is paid by either cell alone
+    assert nkm_sc["representation_s"] == nkm_st["representation_s"] == 60.0
+    assert nkm_sc["worker_s"] == 60.0 + 15.0 + 5.0
+    assert nkm_st["worker_s"] == 60.0 + 2.5 + 10.0
+    assert costs["table1"]["RP-Natural"]["worker_s"] == 0.5 + 20.0
+    assert nkm_sc["two_workers_min"] == round(80.0 / 120, 1)
+    assert costs["table2"] == {"NKM-SC image": {"train_s": 60.0, "detection_s": 125.0,
+                                                "worker_s": 185.0, "two_workers_min": 1.5}}
+    assert bench.per_cell(tmp_path, 100) == {}  # nothing measured at that size
