@@ -9,6 +9,7 @@ about 3 s of a 41 s fit in them. A controller made once lists the libraries once
 from __future__ import annotations
 
 import functools
+import os
 
 
 @functools.cache
@@ -39,8 +40,6 @@ def thread_budget() -> int:
     ``inner_max_num_threads`` default), Ray's tasks their ``num_cpus``. Threads beyond that
     share compete with the other workers for the same cores.
     """
-    import os
-
     try:
         n = len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux

@@ -18,6 +18,7 @@ import numpy as np
 from .._threads import thread_budget
 from ..features import encode_patches
 from ..features.representation import whitening_groups
+from ..memory import reused_heap
 from ..preprocess import _one_blas_thread
 from ..rectangles import corners_from_array, normalize_angle
 from .exact import Detection, _Base, _check_obs, _empty
@@ -407,6 +408,19 @@ def window_statistics(img, msk, eps: float = _STD_EPS):
     return mean, inv, full
 
 
+@contextlib.contextmanager
+def _scoring(detector):
+    """Where a detector scores: BLAS on one thread, the detector's thread pool, and freed
+    large blocks kept in the heap for the next chunk (:func:`dlsr.memory.reused_heap`).
+
+    Without the heap, every array above glibc's mmap threshold is mapped afresh and faulted in
+    4 kB at a time; and once training has called ``mallopt`` (as the recognition benchmark's
+    feature pass does), the threshold no longer adapts and stays at 128 kB for the process.
+    """
+    with _one_blas_thread(), reused_heap(), detector._pool() as pool:
+        yield pool
+
+
 def _map(pool, fn, items) -> list:
     """``[fn(x) for x in items]``, in the pool's threads when there is one."""
     if pool is None or len(items) < 2:
@@ -445,7 +459,7 @@ def score_images_many(detectors, images) -> tuple[list[np.ndarray], list[float]]
     if len({d.chunk_size for d in detectors}) > 1:
         raise ValueError("score_images_many needs detectors of one chunk_size")
     t0 = time.perf_counter()
-    with _one_blas_thread(), detectors[0]._pool() as pool:
+    with _scoring(detectors[0]) as pool:
         scores, alone, spent = _scores_of_images(detectors, images, pool)
     wall = time.perf_counter() - t0
     return scores, [wall * a / spent if spent > 0 else wall for a in alone]
@@ -628,7 +642,7 @@ class DenseDetector(_Base):
             return _empty(reason, t0)
         t1, c1 = time.perf_counter(), time.process_time()
         physical = self._physical_term(obs, region)
-        with _one_blas_thread(), self._pool() as pool:
+        with _scoring(self) as pool:
             src = self._source(obs, cand)
             stride = self.coarse_stride if self.coarse_to_fine else 1
             scores = self._dense_scores(src, cand, stats, pool, stride) + physical(cand)
@@ -669,7 +683,7 @@ class DenseDetector(_Base):
         cand = np.asarray(candidates, dtype=float).reshape(-1, 5)
         if len(cand) == 0:
             return np.full(0, -np.inf)
-        with _one_blas_thread(), self._pool() as pool:
+        with _scoring(self) as pool:
             if source is None:
                 source = self._source(obs, cand)
             own = _new_stats()
@@ -689,7 +703,7 @@ class DenseDetector(_Base):
         -------
         ndarray of shape (n,), float64
         """
-        with _one_blas_thread(), self._pool() as pool:
+        with _scoring(self) as pool:
             return self._exact_scores(obs, rects, pool)
 
     def exact_images(self, obs, rects):
@@ -702,7 +716,7 @@ class DenseDetector(_Base):
         tuple or None
             Opaque inputs of :meth:`score_images` (None for no rectangle).
         """
-        with _one_blas_thread(), self._pool() as pool:
+        with _scoring(self) as pool:
             return self._exact_images(obs, rects, pool)
 
     def score_images(self, images) -> np.ndarray:
@@ -715,7 +729,7 @@ class DenseDetector(_Base):
         """
         if images is None:
             return np.zeros(0)
-        with _one_blas_thread(), self._pool() as pool:
+        with _scoring(self) as pool:
             return self._score_images(images, pool)
 
     # -- internals ---------------------------------------------------------------------------

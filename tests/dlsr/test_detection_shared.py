@@ -100,3 +100,27 @@ def test_the_models_of_one_fold_whiten_the_patches_once(trained, monkeypatch):
     with pytest.raises(ValueError, match="chunk_size"):
         dense.score_images_many([dense.DenseDetector(generic[0], chunk_size=400),
                                  dense.DenseDetector(generic[1], chunk_size=800)], images)
+
+
+@pytest.mark.parametrize("n_threads", [1, 2])
+def test_scoring_keeps_freed_blocks_in_the_heap_in_every_thread(trained, monkeypatch, n_threads):
+    # Every chunk is encoded while dlsr.memory's heap switch is held (the arrays freed by one
+    # chunk serve the next instead of being mapped afresh), and the switch is released after.
+    from dlsr import memory
+    from dlsr.detection import dense
+
+    samples, shared, _ = trained
+    obs = sample_observation(samples[2])
+    det = dense.DenseDetector(shared[1], n_threads=n_threads, chunk_size=400)
+    cand, _, _ = shared[1].detector("lattice", complete=False).candidates(obs)
+    held = []
+    scores = dense._PatchScorer.scores
+    monkeypatch.setattr(dense._PatchScorer, "scores", lambda self, *a: held.append(
+        memory._heap_switch._depth) or scores(self, *a))
+    encoded = dense._PatchScorer.encoded_scores
+    monkeypatch.setattr(dense._PatchScorer, "encoded_scores", lambda self, *a: held.append(
+        memory._heap_switch._depth) or encoded(self, *a))
+    det.exact_scores(obs, cand)
+    det.detect(obs)
+    assert len(held) > 2 and min(held) >= 1
+    assert memory._heap_switch._depth == 0
