@@ -28,7 +28,12 @@ faults:
 Both switches are process-wide and reference counted: overlapping blocks in several threads
 restore the settings once the last one ends. Each does nothing where its switch is missing
 (numpy's private one, or a C library other than glibc). glibc's adaptive mmap threshold stays
-off once ``mallopt`` has been called: afterwards the threshold is the default 128 kB.
+off once ``mallopt`` has been called, so :func:`reused_heap` leaves the thresholds where the
+adaptive ones end up after a large array is freed (mmap above 32 MB, trimming above 64 MB):
+left at glibc's initial 128 kB, every array above it would be mapped afresh for the rest of the
+process. Measured per simulated scene built, rendered and observed (20 scenes, one process
+each): 14,500 page faults and 0.14 CPU s in a fresh process; 53,000 and 0.22 s after a block
+that left the thresholds at 128 kB; 4 and 0.11 s after a block that leaves them at the ceiling.
 """
 
 from __future__ import annotations
@@ -59,9 +64,14 @@ def _glibc():
 
 
 _libc = _glibc()
-# glibc's malloc.h: parameters and the defaults restored on leaving
-_M_TRIM_THRESHOLD, _M_MMAP_MAX = -1, -4
-_DEFAULT_TRIM_THRESHOLD, _DEFAULT_MMAP_MAX = 128 * 1024, 65536
+# glibc's malloc.h: parameters, and the settings left on leaving. ``mallopt`` turns glibc's
+# adaptive mmap threshold off for good (it starts at 128 kB and rises to the largest block
+# freed, at most 32 MB on 64-bit systems, the trim threshold at twice that), so on leaving the
+# thresholds are set to that ceiling: what an adaptive process reaches once it has freed a
+# large array, not the 128 kB of a process that had never freed one.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD, _M_MMAP_MAX = -1, -3, -4
+_LEFT_MMAP_THRESHOLD = 32 * 2**20
+_LEFT_TRIM_THRESHOLD, _DEFAULT_MMAP_MAX = 2 * _LEFT_MMAP_THRESHOLD, 65536
 
 
 class _Switch:
@@ -99,7 +109,8 @@ def _heap_on():
 
 def _heap_off(_):
     _libc.mallopt(_M_MMAP_MAX, _DEFAULT_MMAP_MAX)
-    _libc.mallopt(_M_TRIM_THRESHOLD, _DEFAULT_TRIM_THRESHOLD)
+    _libc.mallopt(_M_MMAP_THRESHOLD, _LEFT_MMAP_THRESHOLD)
+    _libc.mallopt(_M_TRIM_THRESHOLD, _LEFT_TRIM_THRESHOLD)
     _libc.malloc_trim(0)
 
 

@@ -83,6 +83,11 @@ def test_reused_heap_keeps_freed_blocks_and_restores_on_leaving():
             _faults_of_second_allocation(size)
         inside = _faults_of_second_allocation(size)  # the outer block still holds it
     after = _faults_of_second_allocation(size)
+    mid = 8 * 2**20  # below the 32 MB ceiling the thresholds are left at
+    after_mid = _faults_of_second_allocation(mid)
     assert outside > pages // 2  # a fresh mapping, faulted in again
     assert inside < pages // 10  # the freed block served again from the heap
     assert after > pages // 2  # mmap and trimming are back once the last block ended
+    # but not at glibc's initial 128 kB: an 8 MB block freed is served again from the heap,
+    # as in a process whose adaptive threshold has risen
+    assert after_mid < mid // 4096 // 10
