@@ -102,18 +102,6 @@ _ONE32 = np.float32(_ONE)
 _GRAY32 = np.asarray(GRAY_WEIGHTS, dtype=np.float32)
 
 
-def _one_blas_thread():
-    """Context manager: BLAS and LAPACK limited to one thread inside (threadpoolctl).
-
-    scipy's Delaunay computes one barycentric transform per simplex with tiny LAPACK calls; with
-    threaded OpenBLAS on a busy machine each call waits for the thread pool: measured under load
-    3 on 2 cores, 10.5 s instead of 0.28 s for 100 rectangle images. threadpoolctl lets one
-    Python thread at a time control OpenBLAS: called in another thread meanwhile, this changes
-    nothing and that thread's limits apply (the detectors set them in the calling thread).
-    """
-    return _threads.limit(1, user_api="blas")
-
-
 # ---------------------------------------------------------------------------------------------
 # Inputs
 # ---------------------------------------------------------------------------------------------
@@ -244,9 +232,9 @@ def _linear_interpolate(points, values, query) -> np.ndarray:
     outside the hull), computed from the triangulation's barycentric transforms directly:
     on the degenerate (co-circular) triangulations of pixel grids, the interpolator's own call
     took up to 0.7 s for 50 query points here, against about 0.2 ms for this. BLAS is limited
-    to one thread meanwhile (see :func:`_one_blas_thread`).
+    to one thread meanwhile (see ``dlsr._threads.one_blas_thread``).
     """
-    with _one_blas_thread():
+    with _threads.one_blas_thread():
         tri = Delaunay(points)
         simplex = tri.find_simplex(query)
         out = np.full(len(query), np.nan)

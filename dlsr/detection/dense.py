@@ -15,11 +15,10 @@ from concurrent.futures import ThreadPoolExecutor
 import cv2
 import numpy as np
 
-from .._threads import thread_budget
+from .._threads import one_blas_thread, thread_budget
 from ..features import encode_patches
 from ..features.representation import whitening_groups
 from ..memory import reused_heap
-from ..preprocess import _one_blas_thread
 from ..rectangles import corners_from_array, normalize_angle
 from .exact import Detection, _Base, _check_obs, _empty
 from .grid import (
@@ -417,7 +416,7 @@ def _scoring(detector):
     4 kB at a time; and once training has called ``mallopt`` (as the recognition benchmark's
     feature pass does), the threshold no longer adapts and stays at 128 kB for the process.
     """
-    with _one_blas_thread(), reused_heap(), detector._pool() as pool:
+    with one_blas_thread(), reused_heap(), detector._pool() as pool:
         yield pool
 
 

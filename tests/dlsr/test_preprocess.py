@@ -346,7 +346,7 @@ def test_one_blas_thread_limits_inside_nests_and_restores():
 
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    from dlsr.preprocess import _one_blas_thread
+    from dlsr._threads import one_blas_thread
 
     def blas_threads():
         return sorted(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
@@ -355,9 +355,9 @@ def test_one_blas_thread_limits_inside_nests_and_restores():
         before = blas_threads()
         assert before and max(before) == 2
         seen = []
-        with _one_blas_thread():
+        with one_blas_thread():
             seen.append(blas_threads())
-            with _one_blas_thread():
+            with one_blas_thread():
                 seen.append(blas_threads())
             seen.append(blas_threads())
             worker = threading.Thread(target=lambda: seen.append(blas_threads()))
