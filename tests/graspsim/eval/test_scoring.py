@@ -17,14 +17,8 @@ pytestmark = pytest.mark.sim
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory):
-    names = {"can_tall", "box_matches", "toothbrush", "bottle_shampoo"}
-    specs = [s for s in builtin_objects("all") if s.name in names]
-    root = tmp_path_factory.mktemp("data") / "ds"
-    stats = make_dataset(n_scenes=3, objects=specs, out=root, seed=1, n_candidates=6)
-    samples = load_cornell(root)
-    assert any(s.positives for s in samples) and any(s.negatives for s in samples)
-    return root, stats, samples
+def dataset(small_labelled_dataset):
+    return small_labelled_dataset
 
 
 def strip(records):

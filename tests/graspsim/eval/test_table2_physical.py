@@ -7,23 +7,17 @@ import json
 
 import pytest
 
-from dlsr.datasets import load_cornell
-from graspsim.data.datagen import make_dataset
 from graspsim.data.standin import usable_scenes
 from graspsim.eval.offline.table2_physical import benchmark_folders, execute_table2
-from graspsim.sim.objects import builtin_objects
 
 pytestmark = pytest.mark.sim
 
 
 @pytest.fixture(scope="module")
-def labelled(tmp_path_factory):
-    names = {"can_tall", "box_matches", "toothbrush", "bottle_shampoo"}
-    specs = [s for s in builtin_objects("all") if s.name in names]
-    root = tmp_path_factory.mktemp("standin") / "labelled"
-    make_dataset(n_scenes=4, objects=specs, out=root, seed=1, n_candidates=6)
-    usable = usable_scenes(load_cornell(root))
-    assert len(usable) >= 2, "the fixture needs two scenes with a positive and a negative"
+def labelled(small_labelled_dataset):
+    root, _, samples = small_labelled_dataset
+    usable = usable_scenes(samples)
+    assert len(usable) >= 2, "the tests need two scenes with a positive and a negative"
     return root, usable
 
 
