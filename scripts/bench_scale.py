@@ -30,7 +30,8 @@ command took several runs). ``growth`` gives, per table and stage, the exponent 
 of a least-squares fit of ``time = a * size^k`` over the sizes measured, and ``projected`` the
 fit's ``wall_s`` and ``cpu_s`` at Cornell's 885 images when that size was not measured (a
 projection, not a measurement). ``per_cell`` gives, per size, what each cell of Table 1 and
-each row of Table 2 would cost alone (:func:`per_cell`).
+each row of Table 2 would cost alone (:func:`per_cell`). ``OUT/scale.md`` gives every size
+measured so far as Markdown tables (:func:`scale_markdown`), for the README.
 
 The stand-in is always Cornell's size (``--standin-images``), so a size means the same
 images whichever sizes a run asks for; each size's record names its data (``data``: the
@@ -68,7 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dlsr.records import read_json, write_json_atomic
+from dlsr.records import read_json, write_json_atomic, write_text_atomic
 from graspsim.cli import sigterm_unwinds, stop_reason
 from graspsim.data.standin import CORNELL, standin_subset
 
@@ -375,6 +376,65 @@ def projected(rows: dict, size: int = CORNELL["images"]) -> dict:
     return out
 
 
+def _minutes(seconds) -> str:
+    return "" if seconds is None else f"{seconds / 60:,.1f}"
+
+
+def scale_markdown(rows: dict, per_cells: dict, jobs: int) -> str:
+    """The measurements as Markdown (``OUT/scale.md``): per table, one line per size (wall and
+    CPU minutes, peak memory, worker-minutes per stage, the code and load it ran beside), the
+    growth exponent of each column, the projection to 885 images when that size is not
+    measured, and what each cell or row costs alone at the largest size measured."""
+    sizes = sorted(rows, key=int)
+    k = growth(rows)
+    proj = projected(rows)
+    lines = ["# The paper's tables at Cornell's size (the stand-in), measured", "",
+             f"`scripts/bench_scale.py`, {jobs} workers. Minutes; a stage is worker-minutes "
+             "summed over the workers; `k` is the exponent of `time = a * size^k` fitted over "
+             "the sizes measured.", ""]
+    for table, title in (("table1", "Table 1 (36 cells, nested 5 x 5, d = 300)"),
+                         ("table2", "Table 2 (4 rows x 2 splits, one pass)")):
+        have = [n for n in sizes if table in rows[n]]
+        if not have:
+            continue
+        stages = [st for st in rows[have[0]][table]["stages"] if st != "detection_per_image"]
+        lines += [f"## {title}", "",
+                  "| images | wall | CPU | peak PSS (MB) | "
+                  + " | ".join(stages) + " | code | load before, after |",
+                  "|---" * (6 + len(stages)) + "|"]
+        for n in have:
+            r = rows[n][table]
+            code = r.get("code")
+            code = ", ".join(code) if isinstance(code, list) else (code or "")
+            load = r.get("load_average") or []
+            parts = load if load and isinstance(load[0], list) else [load]
+            load = "; ".join(", ".join(str(x) for x in part) for part in parts if part)
+            lines.append(f"| {n} | {_minutes(r['wall_s'])} | {_minutes(r['cpu_s'])} | "
+                         f"{r.get('peak_pss_mb') or ''} | "
+                         + " | ".join(_minutes(r["stages"].get(st)) for st in stages)
+                         + f" | {code} | {load} |")
+        if table in k:
+            fits = k[table]
+            lines.append(f"| k | {fits.get('wall_s', '')} | | | "
+                         + " | ".join(str(fits.get(st, "")) for st in stages) + " | | |")
+        if table in proj:
+            lines.append(f"| {proj[table]['images']} (projected) | "
+                         f"{_minutes(proj[table]['wall_s'])} | {_minutes(proj[table]['cpu_s'])}"
+                         " | | " + " | " * len(stages) + " | |")
+        lines.append("")
+    for table, unit in (("table1", "cell"), ("table2", "row")):
+        measured = [n for n in sizes if table in per_cells.get(int(n), {})]
+        if not measured:
+            continue
+        n = measured[-1]
+        lines += [f"## One {unit} alone, {table.replace('table', 'Table ')} at {n} images", "",
+                  f"| {unit} | worker-minutes | on two workers, minutes |", "|---|---|---|"]
+        for name, c in per_cells[int(n)][table].items():
+            lines.append(f"| {name} | {_minutes(c['worker_s'])} | {c['two_workers_min']} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="100,300,885")
@@ -477,6 +537,9 @@ def _run(args) -> int:
               "growth": growth({s: timings[s] for s in map(str, sizes)}),
               "projected": projected({s: timings[s] for s in map(str, sizes)}),
               "per_cell": {s: per_cell(out, s) for s in sizes}}
+    write_text_atomic(out / "scale.md", scale_markdown(
+        {s: timings[s] for s in timings if s.isdigit()},
+        {int(s): per_cell(out, int(s)) for s in timings if s.isdigit()}, args.jobs))
     print(json.dumps(result, indent=1))
     return 0
 

@@ -339,3 +339,29 @@ def test_bench_scale_per_cell_costs_count_the_shared_representation_in_each_cell
     assert costs["table2"] == {"NKM-SC image": {"train_s": 60.0, "detection_s": 125.0,
                                                 "worker_s": 185.0, "two_workers_min": 1.5}}
     assert bench.per_cell(tmp_path, 100) == {}  # nothing measured at that size
+
+
+def test_bench_scale_markdown_has_each_size_the_exponents_and_the_costs_alone():
+    bench = _bench_scale()
+
+    def t2(n):
+        return {"wall_s": 6.0 * n, "cpu_s": 12.0 * n, "peak_pss_mb": 10.0 * n,
+                "stages": {"detection_per_image": 1.0, "detection": 9.0 * n},
+                "code": ["abc+dirty", "def"], "load_average": [[1.0, 2.0], [0.5, 1.5]]}
+
+    rows = {"100": {"table1": {"wall_s": 1200.0, "cpu_s": 2400.0, "code": "abc",
+                               "load_average": [0.8, 1.9],
+                               "stages": {"coding": 1800.0, "svm_inner_cv": 60.0}},
+                    "table2": t2(100)},
+            "300": {"data": {}, "table2": t2(300)}}
+    per_cells = {100: {"table1": {"NKM-SC": {"worker_s": 240.0, "two_workers_min": 2.0}}},
+                 300: {"table2": {"NKM-SC image": {"worker_s": 600.0, "two_workers_min": 5.0}}}}
+    md = bench.scale_markdown(rows, per_cells, jobs=2)
+    assert "| 100 | 20.0 | 40.0 |  | 30.0 | 1.0 | abc | 0.8, 1.9 |" in md  # table 1, minutes
+    assert "| 300 | 30.0 | 60.0 | 3000.0 | 45.0 | abc+dirty, def | 1.0, 2.0; 0.5, 1.5 |" in md
+    assert "| k | 1.0 | | | 1.0 | | |" in md  # table 2 grows linearly; table 1 has one size
+    assert md.count("| k |") == 1
+    assert "| 885 (projected) | 88.5 | 177.0 |" in md
+    assert "## One cell alone, Table 1 at 100 images" in md and "| NKM-SC | 4.0 | 2.0 |" in md
+    assert "## One row alone, Table 2 at 300 images" in md
+    assert "| NKM-SC image | 10.0 | 5.0 |" in md
