@@ -405,9 +405,10 @@ def scale_markdown(rows: dict, per_cells: dict, jobs: int) -> str:
         for n in have:
             r = rows[n][table]
             code = r.get("code")
-            code = ", ".join(code) if isinstance(code, list) else (code or "")
+            code = ", ".join(str(c) for c in code if c) if isinstance(code, list) \
+                else (code or "")
             load = r.get("load_average") or []
-            parts = load if load and isinstance(load[0], list) else [load]
+            parts = load if load and isinstance(load[0], list | None) else [load]
             load = "; ".join(", ".join(str(x) for x in part) for part in parts if part)
             lines.append(f"| {n} | {_minutes(r['wall_s'])} | {_minutes(r['cpu_s'])} | "
                          f"{r.get('peak_pss_mb') or ''} | "

@@ -347,7 +347,7 @@ def test_bench_scale_markdown_has_each_size_the_exponents_and_the_costs_alone():
     def t2(n):
         return {"wall_s": 6.0 * n, "cpu_s": 12.0 * n, "peak_pss_mb": 10.0 * n,
                 "stages": {"detection_per_image": 1.0, "detection": 9.0 * n},
-                "code": ["abc+dirty", "def"], "load_average": [[1.0, 2.0], [0.5, 1.5]]}
+                "code": ["abc+dirty", None, "def"], "load_average": [[1.0, 2.0], [0.5, 1.5]]}
 
     rows = {"100": {"table1": {"wall_s": 1200.0, "cpu_s": 2400.0, "code": "abc",
                                "load_average": [0.8, 1.9],
