@@ -22,8 +22,9 @@ faults:
   163.2 s; the peak resident memory grows by about 15 % (1.8 -> 2.1 GB). The whole benchmark:
   8 million page faults, 39 s of system time, 3,679 CPU s instead of 3,798 (32 min 33 s ->
   31 min 8 s on 2 cores), the same table. The detectors' scoring runs under it too
-  (:mod:`dlsr.detection.dense`): a process scoring on two threads took 0.39 million faults and
-  0.93 s of system time per image without it, 5,000 and 0.02 s with it, the same scores.
+  (:mod:`dlsr.detection.dense`): a process scoring on two threads after an earlier block took
+  0.39 million faults and 0.93 s of system time per image without it, 5,000 and 0.02 s with it,
+  the same scores (with the thresholds left at 128 kB, before the change below).
 
 Both switches are process-wide and reference counted: overlapping blocks in several threads
 restore the settings once the last one ends. Each does nothing where its switch is missing
