@@ -356,7 +356,7 @@ def _score_task(root, entry, spec_records, execution, rects, top_k, n_prediction
 
 def score_predictions(data, predictions, out=None, format: str | None = None, top_k: int = 1,
                       n_jobs: int = 1, executor=None, progress: bool = False,
-                      objects=None) -> dict:
+                      objects=None, images=None) -> dict:
     """Execute predicted rectangles in the rebuilt scenes of a dataset and summarise.
 
     Parameters
@@ -384,6 +384,9 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
         whose
         files have the fingerprint the dataset recorded (``generator.object_set``) and that
         has every object of the manifest. None: the manifest's paths.
+    images : sequence of str or None
+        Score only these images of the dataset (their ids, as in the predictions); the summary
+        is over them. None: every image. Records already in ``out`` for other images are kept.
 
     Returns
     -------
@@ -396,13 +399,23 @@ def score_predictions(data, predictions, out=None, format: str | None = None, to
     top_k = int(top_k)
     root = Path(data)
     manifest, fingerprint = load_manifest(root)
-    images = manifest["images"]
-    by_id = {e["image"]: e for e in images}
+    by_id = {e["image"]: e for e in manifest["images"]}
+    all_ids = set(by_id)
+    if images is None:
+        images = manifest["images"]
+    else:
+        asked = [str(i) for i in images]
+        unknown = [i for i in asked if i not in by_id]
+        if unknown:
+            raise ValueError(f"{root}: no image {unknown[0]!r} in the dataset "
+                             f"({len(unknown)} of the {len(asked)} images asked for)")
+        images = [by_id[i] for i in dict.fromkeys(asked)]
+        by_id = {e["image"]: e for e in images}
     pred_path = Path(predictions)
     fmt = detect_format(pred_path) if format is None else format
     if fmt not in FORMATS:
         raise ValueError(f"format must be one of {FORMATS}, got {fmt!r}")
-    preds = read_predictions(pred_path, fmt, by_id)
+    preds = read_predictions(pred_path, fmt, all_ids)
     missing = [i for i in by_id if i not in preds]
     if missing:
         log.warning("%d of %d images have no predictions in %s: scored as failures (no grasp "

@@ -206,7 +206,8 @@ def execute_table2(labelled, benches, sizes, out, n_jobs: int = 1, executor=None
             slug = name.replace(" ", "_")
             csv = _csv(out / str(size) / "predictions" / f"{slug}.csv", r)
             folder = out / str(size) / slug
-            score_predictions(labelled, csv, out=folder, n_jobs=n_jobs, executor=executor)
+            score_predictions(labelled, csv, out=folder, n_jobs=n_jobs, executor=executor,
+                              images=ids)
             recs = {rec["image"]: rec for rec in read_jsonl(folder / "scores.jsonl",
                                                             required=("image",))}
             missing = [i for i in ids if i not in recs]

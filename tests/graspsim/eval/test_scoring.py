@@ -113,6 +113,24 @@ def test_top1_by_score_column_and_images_without_predictions(dataset, tmp_path):
     assert s["successes"] == 1 and s["n"] == len(samples)
 
 
+def test_a_subset_of_the_images_is_scored_and_summarised_alone(dataset, tmp_path):
+    root, _, samples = dataset
+    path = write_csv(tmp_path / "p.csv", {x.image_id: x.positives[:1] for x in samples
+                                          if x.positives})
+    first, rest = samples[0].image_id, [x.image_id for x in samples[1:]]
+    full = score_predictions(root, path, out=tmp_path / "out")
+    part = score_predictions(root, path, out=tmp_path / "out", images=[first, first])
+    assert part["n"] == 1 and [r["image"] for r in part["records"]] == [first]
+    assert part["records"][0] == next(r for r in full["records"] if r["image"] == first)
+    # the folder keeps every image's record; a fresh folder scores only those asked for
+    assert len((tmp_path / "out" / "scores.jsonl").read_text().splitlines()) == len(samples)
+    alone = score_predictions(root, path, out=tmp_path / "alone", images=rest)
+    assert {r["image"] for r in alone["records"]} == set(rest)
+    assert len((tmp_path / "alone" / "scores.jsonl").read_text().splitlines()) == len(rest)
+    with pytest.raises(ValueError, match=r"no image '9999' in the dataset"):
+        score_predictions(root, path, images=[first, "9999"])
+
+
 def test_resume_after_a_kill_and_other_configurations(dataset, tmp_path):
     root, _, samples = dataset
     path = write_csv(tmp_path / "p.csv", {x.image_id: x.negatives[:1] + x.positives[:1]
