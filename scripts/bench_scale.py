@@ -536,11 +536,12 @@ def _run(args) -> int:
                           "platform": sys.platform},
               "standin": made["reached"], "sizes": {s: timings[str(s)] for s in map(str, sizes)},
               "growth": growth({s: timings[s] for s in map(str, sizes)}),
-              "projected": projected({s: timings[s] for s in map(str, sizes)}),
-              "per_cell": {s: per_cell(out, s) for s in sizes}}
-    write_text_atomic(out / "scale.md", scale_markdown(
-        {s: timings[s] for s in timings if s.isdigit()},
-        {int(s): per_cell(out, int(s)) for s in timings if s.isdigit()}, args.jobs))
+              "projected": projected({s: timings[s] for s in map(str, sizes)})}
+    # every size measured so far, each size's records read once
+    measured = {s: timings[s] for s in timings if s.isdigit()}
+    costs = {int(s): per_cell(out, int(s)) for s in measured}
+    result["per_cell"] = {s: costs.get(s) or per_cell(out, s) for s in sizes}
+    write_text_atomic(out / "scale.md", scale_markdown(measured, costs, args.jobs))
     print(json.dumps(result, indent=1))
     return 0
 
