@@ -104,20 +104,34 @@ def pick(text: str, known, what: str) -> list[str]:
 
 def run_cell(row: Row, name: str, detector, n: int, out, executor=None, seed: int = 0,
              candidates: int = 32) -> dict:
-    """Run (or continue) ``detector`` on ``row`` to ``n`` trials or rounds in
-    ``out/<row>/<name>``; returns the folder's summary (without its records)."""
+    """Run (or continue) ``detector`` on ``row`` until ``out/<row>/<name>`` holds ``n`` made
+    trials or rounds; returns the folder's summary (without its records).
+
+    A scene that cannot be made (a pile that does not settle, an object off the table) is a
+    logged skip in the folder and pairs with nothing; the cell runs one more scene for each,
+    so that every cell of a row holds ``n`` paired scenes. Scenes are seeded by index, so every
+    detector skips the same ones. At most ``n`` extra scenes are tried.
+    """
     k = candidates if name == "oracle" else 0
     params = ExecutionParams.with_hand(row.hand)
     folder = Path(out) / row.name / name
-    if row.scene is None:
-        s = run_trials(detector, objects=row.objects, n=n, seed=seed, out=folder,
-                       config=TrialConfig(n_candidates=k), params=params, executor=executor,
-                       detector_name=name)
-    else:
-        s = run_rounds(detector, objects=row.objects, n=n, seed=seed, out=folder,
-                       config=TrialConfig(n_candidates=k, n_objects=row.n_objects,
-                                          scene=row.scene),
-                       params=params, executor=executor, detector_name=name)
+    total = n
+    while True:
+        if row.scene is None:
+            s = run_trials(detector, objects=row.objects, n=total, seed=seed, out=folder,
+                           config=TrialConfig(n_candidates=k), params=params,
+                           executor=executor, detector_name=name)
+        else:
+            s = run_rounds(detector, objects=row.objects, n=total, seed=seed, out=folder,
+                           config=TrialConfig(n_candidates=k, n_objects=row.n_objects,
+                                              scene=row.scene),
+                           params=params, executor=executor, detector_name=name)
+        want = n + len(s.get("skipped") or ())
+        if want <= total or want > 2 * n:
+            break
+        log.info("%s %s: %d scene(s) could not be made; running to %d", row.name, name,
+                 want - n, want)
+        total = want
     s.pop("records", None)
     return s
 

@@ -73,12 +73,15 @@ def test_rounds_skip_an_unmade_scene_and_go_on(tmp_path, easy_objects, unmade):
     assert sorted(load_folder(tmp_path / "r")["records"]) == ["0"]  # rounds pair by str
 
 
-def test_a_grid_pairs_around_an_unmade_scene(tmp_path, unmade):
+def test_a_grid_pairs_around_an_unmade_scene_and_tops_up(tmp_path, unmade):
     rows = [Row("drop", objects="test", sizes=(3,))]
     dets = ["mask-pca", "random"]
     res = grow(rows, dets, lambda name, row: load_detector(name), tmp_path)
     drop = res["drop"]
-    assert drop["n"] == 2 and drop["skipped"] == [UNMADE]
+    # scene 1 cannot be made, so each cell runs a fourth scene: 3 paired scenes, as asked
+    assert drop["n"] == 3 and drop["skipped"] == [UNMADE]
     for d in dets:
-        assert sum(drop["cells"][d]["reasons"].values()) == 2
+        assert sum(drop["cells"][d]["reasons"].values()) == 3
+        lines = (tmp_path / "drop" / d / "trials.jsonl").read_text().splitlines()
+        assert sorted(json.loads(x)["index"] for x in lines) == [0, 1, 2, 3]
     assert "Left out: 1 scene(s) that could not be made (indices 1)" in results_markdown(res)
