@@ -110,34 +110,16 @@ Modules
 * :mod:`dlsr.detection.physical`: :func:`physical_features`, :class:`PhysicalEncoder`;
 * :mod:`dlsr.detection.files`: :func:`detect_files` (``graspsim detect``).
 
-Every name is importable from ``dlsr.detection``.
+Every public name is importable from ``dlsr.detection``; private helpers stay in their modules.
 """
 
-# Every top-level name of the former single module, in __all__ or not (constants, private
-# helpers the tests import), stays importable from here.
-from .dense import (  # noqa: F401
-    _GRAY,
-    _ONE,
-    _STD_EPS,
-    DenseDetector,
-    _CanvasCache,
-    _map,
-    _merge_stats,
-    _new_stats,
-    _PatchScorer,
-    _Source,
-)
-from .exact import Detection, ExactGridDetector, _Base, _check_obs, _empty  # noqa: F401
-from .files import detect_files  # noqa: F401
-from .grid import (  # noqa: F401
+from .dense import DenseDetector
+from .exact import Detection, ExactGridDetector
+from .files import detect_files
+from .grid import (
     COARSE_GRID,
     PAPER_GRID,
     SearchGrid,
-    _axes,
-    _box_sums,
-    _disk,
-    _largest_blob,
-    _sat,
     background_mask,
     complete_region,
     enumerate_candidates,
@@ -151,7 +133,7 @@ from .grid import (  # noqa: F401
     within_reach,
 )
 from .lattice import LatticeDetector, detect_many, lattice_candidates, max_width_px
-from .model import (  # noqa: F401
+from .model import (
     DETECTOR_KINDS,
     FORMAT_VERSION,
     GRID,
@@ -160,12 +142,9 @@ from .model import (  # noqa: F401
     SIZE,
     SPLIT,
     DLSRDetector,
-    _default_preprocess,
-    _jsonable,
 )
 from .physical import PHYSICAL_FEATURES, PhysicalEncoder, physical_features
 from .training import (
-    _check_quantile,  # noqa: F401
     check_training_options,
     detection_training_data,
     fit_search_grid,
@@ -211,4 +190,11 @@ __all__ = [
     "enumerate_candidates",
     "jaws_clear",
     "PATCHES_PER_RECTANGLE",
+    "PATCH",
+    "SIZE",
+    "SPLIT",
+    "GRID",
+    "FORMAT_VERSION",
+    "valid_depth",
+    "detect_files",
 ]

@@ -15,14 +15,13 @@ from dlsr.detection import (
     DLSRDetector,
     ExactGridDetector,
     SearchGrid,
-    _PatchScorer,
     enumerate_candidates,
     jaws_clear,
     object_region,
     opening_widths,
     table_plane_mask,
 )
-from dlsr.detection.dense import window_statistics
+from dlsr.detection.dense import _PatchScorer, window_statistics
 from dlsr.features import Representation, rectangle_features
 from dlsr.metrics import rectangle_metric, rectangle_metric_many
 from dlsr.preprocess import rectangle_images
