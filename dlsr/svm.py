@@ -744,7 +744,7 @@ def squared_hinge_fit(X, y_pm, Cs, *, tol=1e-6, max_iter=100, form="auto", warm_
     # One BLAS thread: with more, the Gram and kernel products sum in another order and the
     # solution moved in its last bits, so a model depended on where it was trained (the main
     # process, a worker, the machine's core count).
-    with _threads.limit(1, user_api="blas"):
+    with _threads.one_blas_thread():
         return _squared_hinge_fit(X, y_pm, Cs, tol=tol, max_iter=max_iter, form=form,
                                   warm_start=warm_start, check_input=check_input, start=start)
 

@@ -147,7 +147,7 @@ def fit_zca(X, M=None, epsilon: float = 0.1):
     # One BLAS thread: the covariance's product and the eigendecomposition sum in another
     # order with two threads (P differed by 1e-13), so a model would depend on where it was
     # trained (the main process, a worker, a machine with more cores). 0.1-0.3 s.
-    with _threads.limit(1, user_api="blas"):
+    with _threads.one_blas_thread():
         cov = (Xf.T @ Xf) / (nf - 1)
         eig, V = np.linalg.eigh(cov)
         eig = np.clip(eig, 0.0, None)

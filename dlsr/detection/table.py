@@ -342,7 +342,7 @@ def _fit_table(depth, depth_valid, stride, n_iter, tol, random_state, degree, ba
     # BLAS on one thread: the fit's products and least squares are small (under 20,000 x 10),
     # and a threaded BLAS waits for its pool on a busy machine (a fit took 0.3 s instead of
     # 0.03 s with 2 cores shared)
-    with _threads.limit(1, user_api="blas"):
+    with _threads.one_blas_thread():
         if known is not None:
             fit = _table_from(filled, valid, C, sigma, tol)
         else:
