@@ -38,6 +38,18 @@ def one_blas_thread():
     return limit(1, user_api="blas")
 
 
+def blas_libraries() -> list[dict]:
+    """The BLAS libraries loaded in this process: ``internal_api``, ``version`` and
+    ``architecture`` (OpenBLAS's kernel set, its core type, chosen from the CPU at load time or
+    by ``OPENBLAS_CORETYPE``). Worker processes inherit the environment, so the same choice.
+
+    Products, and so the last bits of every result, follow the kernel set; where a result is
+    chaotic in its inputs (the physics of a dropped object), whole outcomes can.
+    """
+    return [{k: lib.get(k) for k in ("internal_api", "version", "architecture")}
+            for lib in controller().info() if lib.get("user_api") == "blas"]
+
+
 def blas_threads() -> int:
     """Threads BLAS may use now (1 when no BLAS library is loaded)."""
     return max([lib.num_threads for lib in controller().lib_controllers

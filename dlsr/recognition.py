@@ -25,7 +25,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import platform
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -47,7 +46,14 @@ from .features import (
 )
 from .features.encoding import encoder_plan
 from .memory import reused_heap
-from .records import atomic_write, file_errors, load_npz, read_jsonl, write_text_atomic
+from .records import (
+    atomic_write,
+    file_errors,
+    load_npz,
+    machine_record,
+    read_jsonl,
+    write_text_atomic,
+)
 from .svm import FeatureStandardizer, SquaredHingeSVC, squared_hinge_fit
 
 __all__ = [
@@ -510,15 +516,6 @@ def _learner_fold(data, train, test, rep: Representation, encoders, groups, inne
     return results
 
 
-def _blas_libraries() -> list[dict]:
-    """The BLAS libraries of this process (the workers inherit its environment): library,
-    version and the kernels it runs (OpenBLAS's ``architecture``: its core type)."""
-    from ._threads import controller
-
-    return [{k: lib.get(k) for k in ("internal_api", "version", "architecture")}
-            for lib in controller().info() if lib.get("user_api") == "blas"]
-
-
 def _check_names(learners, encoders):
     for name in learners:
         if name not in LEARNERS:
@@ -967,8 +964,7 @@ def run_recognition_benchmark(
     summary = {
         "config": config,
         "key": keys[0],
-        "machine": {"platform": platform.platform(), "processor": platform.processor(),
-                    "python": platform.python_version(), "blas": _blas_libraries()},
+        "machine": machine_record(),
         "seconds_this_run": time.perf_counter() - t0,
         "cpu_seconds_this_run": float(sum(r.get("cpu_seconds", 0.0) for r in computed)),
         "n_jobs": n_jobs,

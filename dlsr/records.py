@@ -18,6 +18,7 @@ import contextlib
 import json
 import logging
 import os
+import platform
 import uuid
 import zipfile
 import zlib
@@ -36,6 +37,7 @@ __all__ = [
     "atomic_write",
     "write_text_atomic",
     "write_json_atomic",
+    "machine_record",
 ]
 
 log = logging.getLogger(__name__)
@@ -283,3 +285,13 @@ def write_text_atomic(path, text: str) -> Path:
 def write_json_atomic(path, obj, indent: int | None = 2, **kwargs) -> Path:
     """Write ``obj`` as JSON (newline-terminated) through :func:`atomic_write`."""
     return write_text_atomic(path, json.dumps(obj, indent=indent, **kwargs) + "\n")
+
+
+def machine_record() -> dict:
+    """What a record says of the machine that made it: ``platform``, ``processor``, ``python``
+    and ``blas`` (:func:`dlsr._threads.blas_libraries`: each BLAS library's version and
+    OpenBLAS's kernel set, which sets the last bits of every product)."""
+    from ._threads import blas_libraries
+
+    return {"platform": platform.platform(), "processor": platform.processor(),
+            "python": platform.python_version(), "blas": blas_libraries()}

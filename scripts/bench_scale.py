@@ -35,8 +35,11 @@ measured so far as Markdown tables (:func:`scale_markdown`), for the README.
 
 The stand-in is always Cornell's size (``--standin-images``), so a size means the same
 images whichever sizes a run asks for; each size's record names its data (``data``: the
-stand-in's labelled scenes and the sha256 of the subset's rectangles), and a size measured on
-other data is measured again.
+stand-in's labelled scenes and the sha256 of the subset's rectangles) and ``standin_blas`` (the
+OpenBLAS kernels its stand-in was labelled with). A size measured on other data stops the run
+with a message that names those kernels: a stand-in labelled with another kernel set differs in
+a few scenes (:mod:`graspsim.data.standin`), and ``OPENBLAS_CORETYPE`` makes the same one again;
+``--remeasure`` measures such a size again instead (its folders under ``--out`` removed).
 
 Finished commands are not run again (their output folders under ``--out`` are reused, and the
 benchmarks themselves resume at the cell and fold), so a killed run continues; a command's
@@ -50,7 +53,7 @@ holds the measurements of 2026-12-04 and 2026-12-05, made by the code before the
 pass and the SVM's second pass, beside other work.)
 
 Usage: python scripts/bench_scale.py --sizes 100,300,885 [--jobs 2] [--standin runs/standin]
-       [--out results/cornell-scale] [--tables 1,2]
+       [--out results/cornell-scale] [--tables 1,2] [--remeasure]
 """
 
 from __future__ import annotations
@@ -257,6 +260,33 @@ def data_fingerprint(data: Path, made: dict) -> dict:
             "standin_labelled": made["labelled_fingerprint"], "rectangles": h.hexdigest()}
 
 
+def blas_kernels(made: dict) -> str | None:
+    """The OpenBLAS kernel sets a stand-in record names (``"SkylakeX"``; None if unrecorded)."""
+    names = sorted({str(lib.get("architecture")) for lib in made.get("blas") or []
+                    if lib.get("architecture")})
+    return "/".join(names) or None
+
+
+def other_data_message(size: int, row: dict, which: dict, made: dict, standin: Path,
+                       out: Path) -> str:
+    """Why size ``size`` is not measured on ``standin`` (its committed timings and folders were
+    made on other data), and the two ways on."""
+    old = row.get("data") or {}
+    was = (f"stand-in {str(old.get('standin_labelled'))[:12]} of {old.get('standin_images')} "
+           f"images, rectangles {str(old.get('rectangles'))[:12]}")
+    now = (f"stand-in {which['standin_labelled'][:12]} of {which['standin_images']} images, "
+           f"rectangles {which['rectangles'][:12]}")
+    kernels = row.get("standin_blas")
+    how = (f"OPENBLAS_CORETYPE={kernels.split('/')[0]}" if kernels else
+           "OPENBLAS_CORETYPE set to the BLAS kernels of the machine that made it")
+    return (f"bench_scale: size {size} in {out} was measured on {was}; {standin} gives {now} "
+            f"(labelled with {blas_kernels(made) or 'unrecorded'} kernels, measured on "
+            f"{kernels or 'unrecorded'} ones: another kernel set labels a few scenes otherwise, "
+            f"see graspsim.data.standin). Make the stand-in again in a new --standin folder with "
+            f"{how}, or pass --remeasure to measure size {size} again (its folders in {out} are "
+            f"removed)")
+
+
 def table1_stages(out: Path) -> dict:
     rec = json.loads((out / "recognition.json").read_text())
     stages = {"patches": 0.0, "whitening": 0.0, "dictionary": 0.0, "coding": 0.0,
@@ -452,6 +482,10 @@ def main(argv=None) -> int:
                          "command's default, what a user runs; 'paper' times the paper's dense "
                          "search); recorded with the timings")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--remeasure", action="store_true",
+                    help="measure again a size measured on another stand-in (its folders under "
+                         "--out are removed); without it such a size is an error that names the "
+                         "BLAS kernels to make the same stand-in with")
     args = ap.parse_args(argv)
     try:
         with sigterm_unwinds():
@@ -490,7 +524,9 @@ def _run(args) -> int:
         row = timings.setdefault(str(size), {})
         if row.get("data") != which:
             # measured on other data (another stand-in, or another thinning of it): measured
-            # again, and the benchmarks' folders removed, as they would resume from them
+            # again only when asked, as the benchmarks' folders (committed) are removed
+            if row and not args.remeasure:
+                raise SystemExit(other_data_message(size, row, which, made, standin, out))
             if row:
                 print(f"bench_scale: size {size} was measured on other data; measuring again",
                       file=sys.stderr)
@@ -508,6 +544,9 @@ def _run(args) -> int:
             # kept before any command runs: a size stopped in its first command continues on
             # the same data next time (its folders and partial timings are not thrown away)
             write_json_atomic(timings_path, timings, indent=1)
+        # the kernels the stand-in was labelled with (graspsim.data.standin: another set gives
+        # another stand-in), named in the message above when a later run's stand-in differs
+        row.setdefault("standin_blas", blas_kernels(made))
         common = ["--data", str(data), "--format", "cornell", "--jobs", str(args.jobs),
                   "--seed", str(args.seed)]
         if "1" in tables and "table1" not in row:

@@ -62,5 +62,7 @@ def _run(args: argparse.Namespace) -> int:
                      executor=executor_from_args(args), scene=args.scene,
                      params=ExecutionParams.with_hand(args.gripper))
     print(f"wrote {s['images']} images ({s['positives']} positives, {s['negatives']} negatives) "
-          f"to {args.out}; manifest {s['manifest']} (sha256 {s['fingerprint'][:12]}...)")
+          f"to {args.out}; manifest {s['manifest']} (sha256 {s['fingerprint'][:12]}...)"
+          + (f"; {len(s['unmade_scenes'])} scenes could not be made (manifest: unmade_scenes)"
+             if s["unmade_scenes"] else ""))
     return 0

@@ -38,5 +38,7 @@ def _run(args: argparse.Namespace) -> int:
     s = make_patches(n=args.n, out=args.out, objects=object_set_from_args(args), seed=args.seed,
                      n_scenes=args.scenes, n_objects=k, executor=executor_from_args(args),
                      scene=args.scene)
-    print(f"wrote {s['n']} patches from {s['scenes']} scenes to {s['path']}")
+    unmade = len(s["unmade_scenes"])
+    print(f"wrote {s['n']} patches from {s['scenes'] - unmade} scenes to {s['path']}"
+          + (f" ({unmade} scenes could not be made)" if unmade else ""))
     return 0

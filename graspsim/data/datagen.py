@@ -37,7 +37,11 @@ the simulated sensor gave no depth --, ``NN/pcdXXXXcpos.txt``, ``NN/pcdXXXXcneg.
   ``objects`` (name, settled base-link ``position`` in metres and ``orientation`` quaternion
   ``x, y, z, w``, exactly as simulated), ``table`` (``z``, ``rgba``), ``camera`` (as in the
   per-image file plus ``near``/``far``), ``redraws``, label counts and outcomes.
-* ``scenes.jsonl`` (the same image entries, one line per finished scene, for resuming),
+  A scene that cannot be made (:class:`graspsim.sim.observe.SceneError`, even in a new
+  simulation) has no image; it is a logged skip, listed with its reason in ``unmade_scenes``
+  (a key present only then).
+* ``scenes.jsonl`` (the same image entries, one line per finished scene, for resuming; a scene
+  that could not be made is a ``skipped`` record, not made again on a resume),
   ``dataset_config.json`` (the configuration, checked on resume) and ``labels.json`` (counts).
 
 Rebuilding a scene from its recorded poses (:func:`graspsim.sim.scene.build_scene`) gives the state
@@ -64,13 +68,13 @@ from dlsr.rectangles import GraspRectangle, normalize_angle
 
 from ..labels.graspability import resolve_objects
 from ..labels.labelling import check_sampler, label_rectangles, sample_candidates
-from ..runtime.campaign import make_executor, read_done
-from ..sim.bullet import worker_sim
+from ..runtime.campaign import make_executor, read_done, skipped_record
+from ..sim.bullet import renew_worker_sim, worker_sim
 from ..sim.execution import ExecutionParams
 from ..sim.layouts import check_scene
 from ..sim.object_sets import check_same_object_set, object_set_meta
 from ..sim.objects import assets_dir
-from ..sim.observe import observe_scene
+from ..sim.observe import SceneError, observe_scene
 from ..sim.profiles import get_profile
 
 __all__ = [
@@ -205,9 +209,31 @@ def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects
     return sample, reasons, entry
 
 
+def _in_a_new_sim_if_unmade(make, *args):
+    """``make(*args)``; a scene it cannot make in the worker's reused simulation
+    (:class:`graspsim.sim.observe.SceneError`) is made once more in a new one
+    (:func:`graspsim.sim.bullet.renew_worker_sim`), whose error, if any, is raised.
+
+    On 2026-12-06 one scene of the Cornell stand-in (random_053) failed with an infinite moment
+    of inertia from pybullet in a worker that had run hundreds of scenes, and was made, with the
+    labels of a run in which it had not failed, in a new process.
+    """
+    try:
+        return make(*args)
+    except SceneError as exc:
+        log.info("%s; made again in a new simulation", exc)
+    renew_worker_sim()
+    return make(*args)
+
+
 def _scene_task(specs, seed, index, n_candidates, n_objects, sampler, profile, scene, params):
-    return scene_sample(specs, seed, index, n_candidates, n_objects, sampler, profile, scene,
-                        params)
+    """:func:`scene_sample`, or ``(None, None, skipped record)`` for a scene that cannot be made
+    even in a new simulation."""
+    try:
+        return _in_a_new_sim_if_unmade(scene_sample, specs, seed, index, n_candidates,
+                                       n_objects, sampler, profile, scene, params)
+    except SceneError as exc:
+        return None, None, skipped_record(index, exc, seed=seed)
 
 
 def _sha256(path) -> str:
@@ -272,7 +298,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     Returns
     -------
     dict
-        Counts: images, positives, negatives, failure reasons, seconds, labelled rectangles/s,
+        Counts: images, positives, negatives, failure reasons, ``unmade_scenes`` (index and
+        reason of each scene that could not be made), seconds, labelled rectangles/s,
         and ``manifest`` (the path of ``scenes.json``) with its ``fingerprint`` (sha256).
     """
     if n_scenes < 1:
@@ -312,11 +339,14 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
     with log_path.open("a") as fh:
         for i, (sample, rs, entry) in zip(
                 todo, ex.imap(_scene_task, tasks, desc="scenes", star=True), strict=True):
-            rec = _write_scene(root, i, sample, rs, entry)
+            rec = entry if sample is None else _write_scene(root, i, sample, rs, entry)
             fh.write(json.dumps(rec) + "\n")
             fh.flush()
             done[i] = rec
-    records = [done[i] for i in sorted(done) if i < n_scenes]
+    finished = [done[i] for i in sorted(done) if i < n_scenes]
+    records = [r for r in finished if "skipped" not in r]
+    unmade = [{"index": r["index"], "reason": r["skipped"]} for r in finished
+              if "skipped" in r]
     write_cornell_mapping(root, [r["mapping"] for r in records if r["mapping"]])
     used = {o["name"] for r in records for o in r["objects"]}
     manifest = {
@@ -335,6 +365,8 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         "rectangle_grid": dict(RECTANGLE_GRID),
         "object_specs": {s.name: _spec_record(s) for s in specs if s.name in used},
         "images": [{k: v for k, v in r.items() if k != "mapping"} for r in records],
+        # only when a scene could not be made, so other datasets' fingerprints stay the same
+        **({"unmade_scenes": unmade} if unmade else {}),
     }
     manifest_path = root / MANIFEST
     write_json_atomic(manifest_path, manifest, indent=1)
@@ -349,6 +381,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
         "positives": int(sum(r["positives"] for r in records)),
         "negatives": int(sum(r["negatives"] for r in records)),
         "outcomes": reasons,
+        "unmade_scenes": unmade,
         "seconds_this_run": round(seconds, 2),
         "labelled_rectangles_per_second": (round(len(todo) * n_candidates / seconds, 2)
                                            if todo and seconds > 0 else None),
@@ -388,6 +421,17 @@ def _write_scene(root: Path, i: int, sample, outcomes: dict, entry: dict) -> dic
             "object_id": sample.object_id, "mapping": line,
             "positives": len(sample.positives), "negatives": len(sample.negatives),
             "outcomes": outcomes}
+
+def _patch_task(specs, seed, index, rects_per_scene, n_objects, scene="drop"):
+    """:func:`_patch_scene` and None, or no images and the reason the scene cannot be made."""
+    try:
+        return (*_in_a_new_sim_if_unmade(_patch_scene, specs, seed, index, rects_per_scene,
+                                         n_objects, scene), None)
+    except SceneError as exc:
+        log.warning("%s: skipped", exc)
+        return (np.zeros((0, 24, 24, 8), np.float32), np.zeros((0, 24, 24, 8), bool),
+                {"index": index, "reason": str(exc)})
+
 
 def _patch_scene(specs, seed, index, rects_per_scene, n_objects, scene="drop"):
     sim = worker_sim()
@@ -436,7 +480,8 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
     Returns
     -------
     dict
-        ``n``, ``scenes``, ``images``, ``path``, ``seconds``.
+        ``n``, ``scenes``, ``images``, ``path``, ``unmade_scenes`` (index and reason of each
+        scene that could not be made, even in a new simulation: a logged skip), ``seconds``.
     """
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
@@ -446,13 +491,16 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
     t0 = time.perf_counter()
     ex = make_executor(executor, n_jobs, progress)
     tasks = [(specs, seed, i, rects_per_scene, n_objects, scene) for i in range(n_scenes)]
-    parts = list(ex.imap(_patch_scene, tasks, desc="scenes", star=True))
+    parts = list(ex.imap(_patch_task, tasks, desc="scenes", star=True))
     images = np.concatenate([p[0] for p in parts])
     masks = np.concatenate([p[1] for p in parts])
+    unmade = [p[2] for p in parts if p[2] is not None]
     if len(images) == 0:
-        raise ValueError("no rectangle images: no object was visible in any scene")
+        raise ValueError("no rectangle images: no object was visible in any scene"
+                         + (f" ({len(unmade)} of {n_scenes} scenes could not be made)"
+                            if unmade else ""))
     patch_seed = int(np.random.SeedSequence(seed, spawn_key=(1 << 30,)).generate_state(1)[0])
     X, M = sample_patches(images, masks, n_patches=n, random_state=patch_seed)
     save_patch_file(out, X, M)
     return {"n": int(len(X)), "scenes": n_scenes, "images": int(len(images)), "path": str(out),
-            "seconds": round(time.perf_counter() - t0, 2)}
+            "unmade_scenes": unmade, "seconds": round(time.perf_counter() - t0, 2)}

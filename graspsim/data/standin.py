@@ -22,7 +22,20 @@ benchmarks at Cornell's size (``scripts/bench_scale.py``) where the real dataset
    to a positive's centre (near misses on the object), as Cornell's are.
 
 ``OUT/standin.json`` records how it was made (objects, seeds, counts asked for and reached, the
-labelled dataset's fingerprint). Rerunning with the same arguments reuses both folders.
+labelled dataset's fingerprint, the BLAS kernels). Rerunning with the same arguments reuses both
+folders.
+
+**The same stand-in on another machine.** The labels are physics: objects dropped on a table,
+rectangles executed. Their inputs pass through numpy's products, whose last bits follow the kernel
+set OpenBLAS chose for the CPU, and a dropped object can settle otherwise when a pose differs in
+its 16th digit. Measured on 2026-12-06 (AMD EPYC of family 26, where OpenBLAS 0.3.31 chooses its
+Haswell kernels): 81 of the 962 labelled scenes differed from the build with
+``OPENBLAS_CORETYPE=SkylakeX`` in the last digits of their recorded poses, 7 of them in their
+images and 3 in their labels, so the fingerprints and the thinned subsets differed; with
+``OPENBLAS_CORETYPE=SkylakeX`` the same machine rebuilt the stand-in of the earlier sessions (AMD
+EPYC, where OpenBLAS chose SkylakeX), fingerprint for fingerprint. ``standin.json`` names the
+kernels (``blas``); set ``OPENBLAS_CORETYPE`` to them to make the same stand-in on a CPU that
+has their instructions.
 """
 
 from __future__ import annotations
@@ -40,7 +53,7 @@ from dlsr.datasets import (
     write_cornell_image,
     write_cornell_mapping,
 )
-from dlsr.records import read_json, write_json_atomic
+from dlsr.records import machine_record, read_json, write_json_atomic
 
 from ..runtime.campaign import read_done
 from ..sim.objects import builtin_objects, random_urdf_objects
@@ -266,7 +279,8 @@ def make_cornell_standin(out, n_images: int = CORNELL["images"],
         What ``standin.json`` holds: ``format``, ``asked`` and ``reached`` counts (images,
         distinct objects, positives, negatives), ``objects``, ``seed``, ``n_candidates``,
         ``labelled_scenes``, ``skipped_scenes`` (no positive or no negative),
-        ``labelled_fingerprint`` and ``how``.
+        ``labelled_fingerprint``, ``blas`` (the BLAS kernels of the run that wrote the record:
+        :func:`dlsr.records.machine_record`) and ``how``.
     """
     for name, v in (("n_images", n_images), ("positives", positives),
                     ("negatives", negatives), ("n_candidates", n_candidates)):
@@ -327,6 +341,9 @@ def make_cornell_standin(out, n_images: int = CORNELL["images"],
         "labelled_scenes": len(samples),
         "skipped_scenes": len(samples) - len(usable),
         "labelled_fingerprint": stats["fingerprint"],
+        # The physics follow the last bits of numpy's products: another OpenBLAS kernel set
+        # labels a few scenes otherwise (OPENBLAS_CORETYPE reproduces a stand-in elsewhere).
+        "blas": machine_record()["blas"],
         # as first recorded (the functions are now in graspsim.data), so stand-ins stay the same
         "how": "graspsim.standin.make_cornell_standin: built-in objects then random_urdfs "
                "train objects; one object per scene, every candidate executed by the physics "

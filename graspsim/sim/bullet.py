@@ -18,8 +18,8 @@ import os
 import sys
 import tempfile
 
-__all__ = ["Simulation", "TIME_STEP", "connect", "worker_sim", "quiet_c_output", "pybullet",
-           "pybullet_data", "BulletClient"]
+__all__ = ["Simulation", "TIME_STEP", "connect", "worker_sim", "renew_worker_sim",
+           "quiet_c_output", "pybullet", "pybullet_data", "BulletClient"]
 
 
 def _flush_c_streams() -> None:
@@ -182,3 +182,22 @@ def worker_sim() -> Simulation:
         _WORKER.clear()
         _WORKER[pid] = sim
     return sim
+
+
+def renew_worker_sim() -> Simulation:
+    """Replace this process's simulator (:func:`worker_sim`) by a new connection.
+
+    A scene is rebuilt after ``resetSimulation`` in the reused connection, and whatever the
+    physics server keeps across resets stays. A scene that could not be made there is made
+    again in a new connection, as a fresh process would make it (see
+    :func:`graspsim.data.datagen.make_dataset`).
+
+    Returns
+    -------
+    Simulation
+        The new simulator, which :func:`worker_sim` returns from now on in this process.
+    """
+    old = _WORKER.pop(os.getpid(), None)
+    if old is not None:
+        old.close()
+    return worker_sim()

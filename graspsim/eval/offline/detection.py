@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import logging
-import platform
 import time
 from pathlib import Path
 
@@ -24,7 +23,7 @@ from tqdm.auto import tqdm
 
 from dlsr.detection import detect_many, sample_observation, train_detector
 from dlsr.metrics import jaccard_matrix, rectangle_metric
-from dlsr.records import write_text_atomic
+from dlsr.records import machine_record, write_text_atomic
 from dlsr.rectangles import as_rect_array
 from dlsr.viz import draw_rectangles
 
@@ -310,8 +309,7 @@ def summarize_detection(recs: list[dict], samples, folds, baselines: list[str],
     success = [bool(r["success"]) for r in recs]
     return {
         "config": config,
-        "machine": {"platform": platform.platform(), "processor": platform.processor(),
-                    "python": platform.python_version()},
+        "machine": machine_record(),
         "accuracy": float(np.mean(success)),
         "accuracy_fold_mean": float(np.mean([f["accuracy"] for f in per_fold])),
         "accuracy_fold_std": float(np.std([f["accuracy"] for f in per_fold])),

@@ -185,3 +185,57 @@ def test_patches_of_packed_scenes(tmp_path, easy_objects):
     assert P.shape == (100, 6, 6, 8) and M.shape == P.shape
     with pytest.raises(ValueError, match="unknown scene"):
         make_patches(n=10, out=tmp_path / "y.npz", objects=easy_objects, scene="heap")
+
+
+def test_a_scene_that_cannot_be_made_is_retried_then_skipped(tmp_path, easy_objects, monkeypatch,
+                                                             dataset):
+    import graspsim.data.datagen as datagen
+    from graspsim.sim.observe import SceneError
+
+    real, calls = datagen.scene_sample, []
+
+    def flaky(specs, seed, index, *args):
+        calls.append(index)
+        if index == 1 or (index == 0 and calls.count(0) == 1):  # 1 never, 0 on its first try
+            raise SceneError(f"scene {index} of seed {seed}: objects never came to rest")
+        return real(specs, seed, index, *args)
+
+    monkeypatch.setattr(datagen, "scene_sample", flaky)
+    root = tmp_path / "ds"
+    stats = make_dataset(n_scenes=3, objects=easy_objects, out=root, seed=4, n_candidates=5)
+    assert calls == [0, 0, 1, 1, 2]  # each failure tried once more, in a new simulation
+    manifest = json.loads((root / MANIFEST).read_text())
+    assert [e["index"] for e in manifest["images"]] == [0, 2]
+    assert [u["index"] for u in manifest["unmade_scenes"]] == [1]
+    assert "never came to rest" in stats["unmade_scenes"][0]["reason"]
+    assert stats["images"] == 2 and not list(root.glob("*/pcd0001*"))
+    assert [s.image_id for s in load_cornell(root)] == ["0000", "0002"]
+    # scene 0, made in a new simulation, is the scene a run without the failure made
+    clean = json.loads((dataset[0] / MANIFEST).read_text())["images"][0]
+    retried = manifest["images"][0]
+    assert retried["depth_sha256"] == clean["depth_sha256"]
+    assert retried["objects"] == clean["objects"]
+    # a resume makes neither again
+    calls.clear()
+    again = make_dataset(n_scenes=3, objects=easy_objects, out=root, seed=4, n_candidates=5)
+    assert calls == [] and again["fingerprint"] == stats["fingerprint"]
+    # a dataset whose scenes were all made has no such key (its fingerprint is unchanged)
+    assert "unmade_scenes" not in json.loads((dataset[0] / MANIFEST).read_text())
+
+
+def test_patches_skip_a_scene_that_cannot_be_made(tmp_path, easy_objects, monkeypatch):
+    import graspsim.data.datagen as datagen
+    from graspsim.sim.observe import SceneError
+
+    real = datagen._patch_scene
+
+    def unmade_1(specs, seed, index, *args):
+        if index == 1:
+            raise SceneError(f"scene {index} of seed {seed}: objects never came to rest")
+        return real(specs, seed, index, *args)
+
+    monkeypatch.setattr(datagen, "_patch_scene", unmade_1)
+    rec = make_patches(n=100, out=tmp_path / "p.npz", objects=easy_objects, seed=1, n_scenes=3,
+                       rects_per_scene=3)
+    assert [u["index"] for u in rec["unmade_scenes"]] == [1] and rec["n"] == 100
+    assert rec["images"] <= 6  # the two scenes made

@@ -297,7 +297,8 @@ def test_bench_scale_size_stopped_in_its_first_command_continues_it(tmp_path, mo
         raise bench.Interrupted(part)
 
     args = argparse.Namespace(sizes="100", tables="1", standin=str(standin), out=str(out),
-                              standin_images=885, jobs=2, seed=0, detection_preset=None)
+                              standin_images=885, jobs=2, seed=0, detection_preset=None,
+                              remeasure=False)
     monkeypatch.setattr(bench, "timed", stopped)
     with pytest.raises(bench.Interrupted):
         bench._run(args)
@@ -306,6 +307,60 @@ def test_bench_scale_size_stopped_in_its_first_command_continues_it(tmp_path, mo
     assert (out / "table1_100" / "cells.jsonl").exists()  # its saved cells were kept
     t = json.loads((out / "timings.json").read_text())["100"]["table1"]
     assert t["segments"] == 2 and t["wall_s"] == 15.0
+
+
+def test_bench_scale_refuses_a_size_measured_on_another_standin_unless_asked(tmp_path,
+                                                                           monkeypatch, capsys):
+    import argparse
+    import json
+
+    bench = _bench_scale()
+    standin, out = tmp_path / "standin", tmp_path / "out"
+    standin.mkdir()
+    made = {"reached": {"images": 885}, "labelled_fingerprint": "a" * 64,
+            "blas": [{"internal_api": "openblas", "architecture": "SkylakeX"}]}
+    (standin / "standin.json").write_text(json.dumps(made))
+    monkeypatch.setattr(bench.subprocess, "run", lambda *a, **k: None)
+    monkeypatch.setattr(bench, "code_version", lambda: "abc")
+    monkeypatch.setattr(bench, "standin_subset", lambda src, dst, n: dst)
+    data = {"images": 100, "standin_images": 885, "standin_labelled": "a" * 64,
+            "rectangles": "r" * 64}
+    monkeypatch.setattr(bench, "data_fingerprint", lambda d, m: dict(data))
+    monkeypatch.setattr(bench, "table1_stages", lambda dest: {})
+
+    def measured(cmd):
+        (out / "table1_100").mkdir(parents=True, exist_ok=True)
+        (out / "table1_100" / "cells.jsonl").write_text("{}\n")
+        return {"wall_s": 5.0, "cpu_s": 9.0, "peak_rss_mb": 1.0, "rss_trace_mb": [1.0]}
+
+    monkeypatch.setattr(bench, "timed", measured)
+    args = argparse.Namespace(sizes="100", tables="1", standin=str(standin), out=str(out),
+                              standin_images=885, jobs=2, seed=0, detection_preset=None,
+                              remeasure=False)
+    assert bench._run(args) == 0
+    capsys.readouterr()
+    assert json.loads((out / "timings.json").read_text())["100"]["standin_blas"] == "SkylakeX"
+    # the same stand-in made with other kernels: other scenes, so other rectangles
+    made_here = dict(made, labelled_fingerprint="b" * 64,
+                     blas=[{"internal_api": "openblas", "architecture": "Haswell"}])
+    (standin / "standin.json").write_text(json.dumps(made_here))
+    monkeypatch.setattr(bench, "data_fingerprint",
+                        lambda d, m: dict(data, standin_labelled="b" * 64, rectangles="s" * 64))
+    before = (out / "timings.json").read_text()
+    with pytest.raises(SystemExit) as stop:
+        bench._run(args)
+    msg = str(stop.value)
+    assert "\n" not in msg and "size 100" in msg and "OPENBLAS_CORETYPE=SkylakeX" in msg
+    assert "Haswell" in msg and "--remeasure" in msg
+    # nothing measured was thrown away
+    assert (out / "timings.json").read_text() == before
+    assert (out / "table1_100" / "cells.jsonl").exists()
+    # asked to, it measures the size again on this stand-in
+    args.remeasure = True
+    assert bench._run(args) == 0
+    row = json.loads((out / "timings.json").read_text())["100"]
+    assert row["data"]["standin_labelled"] == "b" * 64 and row["standin_blas"] == "Haswell"
+    assert "measuring again" in capsys.readouterr().err
 
 
 def test_bench_scale_per_cell_costs_count_the_shared_representation_in_each_cell(tmp_path):
