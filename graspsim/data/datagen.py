@@ -69,12 +69,12 @@ from dlsr.rectangles import GraspRectangle, normalize_angle
 from ..labels.graspability import resolve_objects
 from ..labels.labelling import check_sampler, label_rectangles, sample_candidates
 from ..runtime.campaign import make_executor, read_done, skipped_record
-from ..sim.bullet import renew_worker_sim, worker_sim
+from ..sim.bullet import worker_sim
 from ..sim.execution import ExecutionParams
 from ..sim.layouts import check_scene
 from ..sim.object_sets import check_same_object_set, object_set_meta
 from ..sim.objects import assets_dir
-from ..sim.observe import SceneError, observe_scene
+from ..sim.observe import SceneError, made_again_if_unmade, observe_scene
 from ..sim.profiles import get_profile
 
 __all__ = [
@@ -209,29 +209,12 @@ def scene_sample(specs, seed: int, index: int, n_candidates: int = 48, n_objects
     return sample, reasons, entry
 
 
-def _in_a_new_sim_if_unmade(make, *args):
-    """``make(*args)``; a scene it cannot make in the worker's reused simulation
-    (:class:`graspsim.sim.observe.SceneError`) is made once more in a new one
-    (:func:`graspsim.sim.bullet.renew_worker_sim`), whose error, if any, is raised.
-
-    On 2026-12-06 one scene of the Cornell stand-in (random_053) failed with an infinite moment
-    of inertia from pybullet in a worker that had run hundreds of scenes, and was made, with the
-    labels of a run in which it had not failed, in a new process.
-    """
-    try:
-        return make(*args)
-    except SceneError as exc:
-        log.info("%s; made again in a new simulation", exc)
-    renew_worker_sim()
-    return make(*args)
-
-
 def _scene_task(specs, seed, index, n_candidates, n_objects, sampler, profile, scene, params):
     """:func:`scene_sample`, or ``(None, None, skipped record)`` for a scene that cannot be made
-    even in a new simulation."""
+    even in a new simulation (:func:`graspsim.sim.observe.made_again_if_unmade`)."""
     try:
-        return _in_a_new_sim_if_unmade(scene_sample, specs, seed, index, n_candidates,
-                                       n_objects, sampler, profile, scene, params)
+        return made_again_if_unmade(lambda: scene_sample(
+            specs, seed, index, n_candidates, n_objects, sampler, profile, scene, params))
     except SceneError as exc:
         return None, None, skipped_record(index, exc, seed=seed)
 
@@ -425,8 +408,8 @@ def _write_scene(root: Path, i: int, sample, outcomes: dict, entry: dict) -> dic
 def _patch_task(specs, seed, index, rects_per_scene, n_objects, scene="drop"):
     """:func:`_patch_scene` and None, or no images and the reason the scene cannot be made."""
     try:
-        return (*_in_a_new_sim_if_unmade(_patch_scene, specs, seed, index, rects_per_scene,
-                                         n_objects, scene), None)
+        return (*made_again_if_unmade(lambda: _patch_scene(
+            specs, seed, index, rects_per_scene, n_objects, scene)), None)
     except SceneError as exc:
         log.warning("%s: skipped", exc)
         return (np.zeros((0, 24, 24, 8), np.float32), np.zeros((0, 24, 24, 8), bool),

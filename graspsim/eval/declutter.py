@@ -36,7 +36,7 @@ import numpy as np
 from ..runtime.campaign import run_campaign, skipped_record
 from ..sim.bullet import worker_sim
 from ..sim.execution import ExecutionParams
-from ..sim.observe import SceneError, observe_scene, profile_capture
+from ..sim.observe import SceneError, made_again_if_unmade, observe_scene, profile_capture
 from ..sim.scene import build_scene, scene_after_grasp
 from .stats import bootstrap_ratio_interval, wilson_interval
 from .summary import execution_line, planning_line, planning_stats, skipped_line
@@ -149,7 +149,8 @@ def run_round(sim, specs, detector, seed: int, index: int,
 
 def _round_task(specs, detector, seed, index, config, params):
     try:
-        return run_round(worker_sim(), specs, detector, seed, index, config, params)
+        return made_again_if_unmade(lambda: run_round(
+            worker_sim(), specs, detector, seed, index, config, params))
     except SceneError as exc:
         return skipped_record(index, exc, seed=seed)
 

@@ -63,7 +63,7 @@ from ..sim.execution import (
 )
 from ..sim.layouts import check_scene
 from ..sim.object_sets import check_same_object_set, object_set_meta
-from ..sim.observe import SceneError, observation, observe_scene
+from ..sim.observe import SceneError, made_again_if_unmade, observation, observe_scene
 from ..sim.scene import build_scene
 from .summary import summarize, summary_markdown
 
@@ -422,8 +422,9 @@ def upgrade_campaign_config(old: dict, meta: dict, path) -> dict:
 
 def _trial_task(specs, detector, seed, index, config, params, known=None, share=False):
     try:
-        return run_trial(worker_sim(), specs, detector, seed, index, config, params,
-                         known=known, share=share)
+        return made_again_if_unmade(lambda: run_trial(
+            worker_sim(), specs, detector, seed, index, config, params, known=known,
+            share=share))
     except SceneError as exc:
         return skipped_record(index, exc, seed=seed)
 

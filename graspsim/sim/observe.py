@@ -9,13 +9,19 @@ replay a trial all build its scene here.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from ..sim.profiles import get_profile
+from .bullet import renew_worker_sim
 from .layouts import make_scene_of
 from .scene import build_scene, capture
 
-__all__ = ["SceneError", "trial_streams", "observe_scene", "profile_capture", "observation"]
+__all__ = ["SceneError", "made_again_if_unmade", "trial_streams", "observe_scene",
+           "profile_capture", "observation"]
+
+log = logging.getLogger(__name__)
 
 
 class SceneError(ValueError):
@@ -23,6 +29,35 @@ class SceneError(ValueError):
     settles). It is the same scene for every detector, so a campaign records it as a skip
     (:func:`graspsim.runtime.campaign.skipped_record`) and pairs detectors on the scenes that
     were made."""
+
+
+def made_again_if_unmade(make):
+    """``make()``, made once more in a new simulation if its scene could not be made.
+
+    ``make`` builds its scene in this process's simulator (:func:`graspsim.sim.bullet.worker_sim`,
+    which it calls). A :class:`SceneError` there is followed by a new connection
+    (:func:`graspsim.sim.bullet.renew_worker_sim`) and a second ``make()``, whose error, if any,
+    is raised: a scene that cannot be made fails twice, the same for every detector, while a
+    failure of the reused connection does not cost a scene. On 2026-12-06 one scene of the
+    Cornell stand-in (random_053) failed with an infinite moment of inertia from pybullet in a
+    worker that had run hundreds of scenes, and was made in a new process with the labels of a
+    run in which it had not failed.
+
+    Parameters
+    ----------
+    make : callable
+        Takes no argument.
+
+    Returns
+    -------
+    What ``make`` returns.
+    """
+    try:
+        return make()
+    except SceneError as exc:
+        log.info("%s; made again in a new simulation", exc)
+    renew_worker_sim()
+    return make()
 
 
 def trial_streams(seed: int, index: int) -> dict:

@@ -85,3 +85,35 @@ def test_a_grid_pairs_around_an_unmade_scene_and_tops_up(tmp_path, unmade):
         lines = (tmp_path / "drop" / d / "trials.jsonl").read_text().splitlines()
         assert sorted(json.loads(x)["index"] for x in lines) == [0, 1, 2, 3]
     assert "Left out: 1 scene(s) that could not be made (indices 1)" in results_markdown(res)
+
+
+def test_a_scene_that_fails_once_is_made_in_a_new_simulation(tmp_path, easy_objects,
+                                                              monkeypatch):
+    import graspsim.sim.bullet as bullet
+    from graspsim.sim.observe import SceneError, made_again_if_unmade
+
+    real, calls = trials_mod.make_scene_of, []
+
+    def fails_once(kind, sim, specs, rng, **kwargs):  # scene 1 fails in its first simulation
+        first = rng.bit_generator.state == trial_streams(0, UNMADE)["scene"].bit_generator.state
+        calls.append(sim)  # kept, so a new simulation is not mistaken for an old one
+        if first and len(calls) == 2:
+            raise ValueError("inertia must be 3 finite moments >= 0, got [1e-06, inf, inf]")
+        return real(kind, sim, specs, rng, **kwargs)
+
+    cfg = TrialConfig(n_candidates=0)
+    clean = run_trials("mask-pca", easy_objects, n=3, seed=0, out=tmp_path / "a", config=cfg)
+    monkeypatch.setattr(trials_mod, "make_scene_of", fails_once)
+    s = run_trials("mask-pca", easy_objects, n=3, seed=0, out=tmp_path / "b", config=cfg)
+    assert s["skipped"] == [] and len(calls) == 4
+    assert calls[2] is not calls[1]  # made again in another simulation (a new connection)
+    assert [r["success"] for r in s["records"]] == [r["success"] for r in clean["records"]]
+    assert [r["rectangle"] for r in s["records"]] == [r["rectangle"] for r in clean["records"]]
+
+    def never():
+        raise SceneError("scene 7 of seed 0: the heap did not settle")
+
+    before = bullet.worker_sim()
+    with pytest.raises(SceneError, match="did not settle"):
+        made_again_if_unmade(never)
+    assert bullet.worker_sim() is not before
