@@ -24,7 +24,8 @@ the one pass each row's seconds count the candidates and rectangle images it sha
 so ``detection``, their sum, is an upper bound of the pass's detection time).
 ``rss_trace_mb`` is the peak memory in each tenth of the run's wall time (flat when nothing
 accumulates across cells and folds). ``code`` names the commit that ran (``+dirty`` when
-tracked files differed from it) and ``load_average`` the machine's 1-minute load before and
+tracked files differed from it), ``cpu`` the processor (:func:`cpu_name`; a measurement of
+several segments may span machines) and ``load_average`` the machine's 1-minute load before and
 after: a measurement beside other work, or of older code, says so (one entry per part when a
 command took several runs). ``growth`` gives, per table and stage, the exponent ``k``
 of a least-squares fit of ``time = a * size^k`` over the sizes measured, and ``projected`` the
@@ -152,6 +153,20 @@ def code_version() -> str | None:
     return head + ("+dirty" if dirty else "")
 
 
+def cpu_name() -> str:
+    """The processor as /proc/cpuinfo names it, with its family and model (``"AMD EPYC, family
+    26 model 2"``): segments of one measurement run on different machines say so."""
+    fields = {}
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            fields.setdefault(key.strip(), value.strip())
+    except OSError:
+        return "unknown"
+    return (f"{fields.get('model name', 'unknown')}, family {fields.get('cpu family', '?')} "
+            f"model {fields.get('model', '?')}")
+
+
 def timed(cmd: list[str]) -> dict:
     """Run ``cmd``; its wall and CPU seconds and the peak memory of its process tree, with the
     code it ran (:func:`code_version`) and the machine's 1-minute load average before and
@@ -200,7 +215,7 @@ def timed(cmd: list[str]) -> dict:
     peak = max((m for _, m in samples), default=0.0)
     record = {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak, 1),
               "peak_pss_mb": round(max(pss, default=0.0), 1),
-              "rss_trace_mb": rss_trace(samples, wall), "code": version,
+              "rss_trace_mb": rss_trace(samples, wall), "code": version, "cpu": cpu_name(),
               "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)]}
     if interrupted is not None:
         raise Interrupted(record, interrupted) from None
@@ -231,7 +246,7 @@ def resumed(key: str, cmd: list[str], partial_path: Path) -> dict:
            "peak_rss_mb": max(p["peak_rss_mb"] for p in allp),
            "peak_pss_mb": max(p.get("peak_pss_mb", 0.0) for p in allp),
            "rss_trace_mb": [p["rss_trace_mb"] for p in allp], "segments": len(allp),
-           "code": [p.get("code") for p in allp],
+           "code": [p.get("code") for p in allp], "cpu": [p.get("cpu") for p in allp],
            "load_average": [p.get("load_average") for p in allp]}
     partial.pop(key, None)
     write_json_atomic(partial_path, partial, indent=1)

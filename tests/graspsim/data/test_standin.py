@@ -190,6 +190,7 @@ def test_bench_scale_timing_names_the_code_and_the_load_it_ran_beside(tmp_path, 
 
     bench = _bench_scale()
     t = bench.timed([sys.executable, "-c", "pass"])
+    assert isinstance(t["cpu"], str) and t["cpu"]
     repo = str(Path(bench.__file__).parents[1])
     head = subprocess.run(["git", "-C", repo, "rev-parse", "--short=12", "HEAD"],
                           capture_output=True, text=True)
