@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._threads import blas_libraries
+
 __all__ = [
     "CorruptFileError",
     "check_magic",
@@ -291,7 +293,5 @@ def machine_record() -> dict:
     """What a record says of the machine that made it: ``platform``, ``processor``, ``python``
     and ``blas`` (:func:`dlsr._threads.blas_libraries`: each BLAS library's version and
     OpenBLAS's kernel set, which sets the last bits of every product)."""
-    from ._threads import blas_libraries
-
     return {"platform": platform.platform(), "processor": platform.processor(),
             "python": platform.python_version(), "blas": blas_libraries()}

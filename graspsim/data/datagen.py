@@ -328,8 +328,7 @@ def make_dataset(n_scenes: int = 20, objects="train", out="sim_cornell", seed: i
             done[i] = rec
     finished = [done[i] for i in sorted(done) if i < n_scenes]
     records = [r for r in finished if "skipped" not in r]
-    unmade = [{"index": r["index"], "reason": r["skipped"]} for r in finished
-              if "skipped" in r]
+    unmade = _unmade(finished)
     write_cornell_mapping(root, [r["mapping"] for r in records if r["mapping"]])
     used = {o["name"] for r in records for o in r["objects"]}
     manifest = {
@@ -405,15 +404,25 @@ def _write_scene(root: Path, i: int, sample, outcomes: dict, entry: dict) -> dic
             "positives": len(sample.positives), "negatives": len(sample.negatives),
             "outcomes": outcomes}
 
+
+def _unmade(records) -> list[dict]:
+    """Index and reason of each skipped record
+    (:func:`graspsim.runtime.campaign.skipped_record`)."""
+    return [{"index": r["index"], "reason": r["skipped"]} for r in records if "skipped" in r]
+
+
+def _no_images():
+    return np.zeros((0, 24, 24, 8), np.float32), np.zeros((0, 24, 24, 8), bool)
+
+
 def _patch_task(specs, seed, index, rects_per_scene, n_objects, scene="drop"):
-    """:func:`_patch_scene` and None, or no images and the reason the scene cannot be made."""
+    """:func:`_patch_scene` and None, or no images and the skipped record of a scene that cannot
+    be made."""
     try:
         return (*made_again_if_unmade(lambda: _patch_scene(
             specs, seed, index, rects_per_scene, n_objects, scene)), None)
     except SceneError as exc:
-        log.warning("%s: skipped", exc)
-        return (np.zeros((0, 24, 24, 8), np.float32), np.zeros((0, 24, 24, 8), bool),
-                {"index": index, "reason": str(exc)})
+        return (*_no_images(), skipped_record(index, exc, seed=seed))
 
 
 def _patch_scene(specs, seed, index, rects_per_scene, n_objects, scene="drop"):
@@ -422,7 +431,7 @@ def _patch_scene(specs, seed, index, rects_per_scene, n_objects, scene="drop"):
     rects = sample_candidates(frame.segmentation, bodies.objects, st["label"], rects_per_scene,
                               depth=frame.depth_clean)
     if not rects:
-        return np.zeros((0, 24, 24, 8), np.float32), np.zeros((0, 24, 24, 8), bool)
+        return _no_images()
     images, masks = rectangle_images(frame.rgb, frame.depth, frame.depth_valid, rects, size=24)
     return np.asarray(images, np.float32), np.asarray(masks, bool)
 
@@ -477,7 +486,7 @@ def make_patches(n: int = 100_000, out="patches.npz", objects="all", seed: int =
     parts = list(ex.imap(_patch_task, tasks, desc="scenes", star=True))
     images = np.concatenate([p[0] for p in parts])
     masks = np.concatenate([p[1] for p in parts])
-    unmade = [p[2] for p in parts if p[2] is not None]
+    unmade = _unmade(p[2] for p in parts if p[2] is not None)
     if len(images) == 0:
         raise ValueError("no rectangle images: no object was visible in any scene"
                          + (f" ({len(unmade)} of {n_scenes} scenes could not be made)"
