@@ -40,7 +40,9 @@ stand-in's labelled scenes and the sha256 of the subset's rectangles) and ``stan
 OpenBLAS kernels its stand-in was labelled with). A size measured on other data stops the run
 with a message that names those kernels: a stand-in labelled with another kernel set differs in
 a few scenes (:mod:`graspsim.data.standin`), and ``OPENBLAS_CORETYPE`` makes the same one again;
-``--remeasure`` measures such a size again instead (its folders under ``--out`` removed).
+``--remeasure`` measures such a size again instead (its folders under ``--out`` removed). On the
+same data, ``--remeasure`` measures the asked sizes' asked tables again (newer code, another
+machine); a remeasurement stopped midway continues without the flag.
 
 Finished commands are not run again (their output folders under ``--out`` are reused, and the
 benchmarks themselves resume at the cell and fold), so a killed run continues; a command's
@@ -302,6 +304,22 @@ def other_data_message(size: int, row: dict, which: dict, made: dict, standin: P
             f"removed)")
 
 
+def forget(out: Path, partial_path: Path, size: int, tables: set) -> None:
+    """Remove what ``tables`` ("1", "2") measured at ``size`` under ``out``: the benchmarks'
+    folders and the stopped parts kept in ``partial_path`` (the caller drops their timings)."""
+    for t in tables:  # table1_100 and table2_100_*, not table1_1000
+        for old in [out / f"table{t}_{size}", *out.glob(f"table{t}_{size}_*")]:
+            if old.is_dir():
+                shutil.rmtree(old)
+    if partial_path.exists():
+        partial = read_json(partial_path, "partial timings")
+        stale = [k for k in partial for t in tables
+                 if k == f"table{t}_{size}" or k.startswith(f"table{t}_{size}_")]
+        for key in set(stale):
+            del partial[key]
+        write_json_atomic(partial_path, partial, indent=1)
+
+
 def table1_stages(out: Path) -> dict:
     rec = json.loads((out / "recognition.json").read_text())
     stages = {"patches": 0.0, "whitening": 0.0, "dictionary": 0.0, "coding": 0.0,
@@ -498,9 +516,10 @@ def main(argv=None) -> int:
                          "search); recorded with the timings")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--remeasure", action="store_true",
-                    help="measure again a size measured on another stand-in (its folders under "
-                         "--out are removed); without it such a size is an error that names the "
-                         "BLAS kernels to make the same stand-in with")
+                    help="measure the asked sizes and tables again, already measured or not (on "
+                         "newer code, another machine, or another stand-in: their folders under "
+                         "--out are removed); without it a size measured on another stand-in is "
+                         "an error that names the BLAS kernels to make the same stand-in with")
     args = ap.parse_args(argv)
     try:
         with sigterm_unwinds():
@@ -545,19 +564,22 @@ def _run(args) -> int:
             if row:
                 print(f"bench_scale: size {size} was measured on other data; measuring again",
                       file=sys.stderr)
-            for old in out.glob(f"table[12]_{size}*"):
-                shutil.rmtree(old)
-            if partial_path.exists():
-                partial = read_json(partial_path, "partial timings")
-                for key in [k for k in partial
-                            if k in (f"table1_{size}", f"table2_{size}")
-                            or k.startswith(f"table2_{size}_")]:
-                    del partial[key]
-                write_json_atomic(partial_path, partial, indent=1)
+            forget(out, partial_path, size, {"1", "2"})
             row.clear()
             row["data"] = which
             # kept before any command runs: a size stopped in its first command continues on
             # the same data next time (its folders and partial timings are not thrown away)
+            write_json_atomic(timings_path, timings, indent=1)
+        elif args.remeasure and any(f"table{t}" in row or (out / f"table{t}_{size}").exists()
+                                    for t in tables):
+            # the same data measured again when asked (newer code, another machine): only the
+            # asked tables are forgotten; a remeasurement stopped midway continues without
+            # --remeasure (with it, it would start over)
+            print(f"bench_scale: measuring table(s) {','.join(sorted(tables))} at size {size} "
+                  f"again", file=sys.stderr)
+            forget(out, partial_path, size, tables)
+            for t in tables:
+                row.pop(f"table{t}", None)
             write_json_atomic(timings_path, timings, indent=1)
         # the kernels the stand-in was labelled with (graspsim.data.standin: another set gives
         # another stand-in), named in the message above when a later run's stand-in differs

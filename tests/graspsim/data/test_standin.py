@@ -364,6 +364,54 @@ def test_bench_scale_refuses_a_size_measured_on_another_standin_unless_asked(tmp
     assert "measuring again" in capsys.readouterr().err
 
 
+def test_bench_scale_remeasure_measures_the_asked_table_again_on_the_same_data(tmp_path,
+                                                                                monkeypatch):
+    import argparse
+    import json
+    from pathlib import Path
+
+    bench = _bench_scale()
+    standin, out = tmp_path / "standin", tmp_path / "out"
+    standin.mkdir()
+    (standin / "standin.json").write_text(json.dumps({"reached": {"images": 885}}))
+    monkeypatch.setattr(bench.subprocess, "run", lambda *a, **k: None)
+    monkeypatch.setattr(bench, "code_version", lambda: "abc")
+    monkeypatch.setattr(bench, "standin_subset", lambda src, dst, n: dst)
+    monkeypatch.setattr(bench, "data_fingerprint", lambda d, m: {"images": 100})
+    monkeypatch.setattr(bench, "table1_stages", lambda dest: {})
+    monkeypatch.setattr(bench, "table2_stages", lambda dests: {})
+    monkeypatch.setattr(bench, "table2_detector", lambda dest: {})
+    runs = []
+
+    def measured(cmd):
+        dest = Path(cmd[cmd.index("--out") + 1])
+        dest.mkdir(parents=True, exist_ok=True)
+        (dest / "run.txt").write_text(str(len(runs)))
+        runs.append(dest.name)
+        return {"wall_s": float(len(runs)), "cpu_s": 1.0, "peak_rss_mb": 1.0,
+                "rss_trace_mb": [1.0]}
+
+    monkeypatch.setattr(bench, "timed", measured)
+    # a size's neighbour whose name starts alike, and a stopped part of this size's Table 1
+    (out / "table1_1000").mkdir(parents=True)
+    (out / "partial.json").write_text(json.dumps({"table1_100": [{"wall_s": 3.0}],
+                                                  "table1_1000": [{"wall_s": 4.0}]}))
+    args = argparse.Namespace(sizes="100", tables="1,2", standin=str(standin), out=str(out),
+                              standin_images=885, jobs=2, seed=0, detection_preset=None,
+                              remeasure=False)
+    assert bench._run(args) == 0 and runs == ["table1_100", "table2_100"]
+    assert bench._run(args) == 0 and len(runs) == 2  # measured: not run again
+    args.tables, args.remeasure = "1", True
+    assert bench._run(args) == 0 and runs[2:] == ["table1_100"]
+    row = json.loads((out / "timings.json").read_text())["100"]
+    assert row["table1"]["wall_s"] == 3.0 and "segments" not in row["table1"]
+    assert row["table2"]["wall_s"] == 2.0  # the table not asked for is kept
+    assert (out / "table1_100" / "run.txt").read_text() == "2"
+    assert (out / "table2_100" / "run.txt").read_text() == "1"
+    assert (out / "table1_1000").is_dir()
+    assert json.loads((out / "partial.json").read_text()) == {"table1_1000": [{"wall_s": 4.0}]}
+
+
 def test_bench_scale_per_cell_costs_count_the_shared_representation_in_each_cell(tmp_path):
     bench = _bench_scale()
     t1 = tmp_path / "table1_50"
