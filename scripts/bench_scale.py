@@ -15,9 +15,14 @@ under ``--standin``; the smaller sizes are its first images):
 Each command runs as a child process with ``--jobs`` workers. Per size and table: ``wall_s``,
 ``cpu_s`` (the whole process tree's user + system seconds, from ``getrusage``),
 ``peak_pss_mb`` (the largest sum of the tree's proportional set sizes: the memory it holds,
-pages shared between its processes counted once), ``peak_rss_mb`` (the largest sum of the
-tree's resident sets, which counts shared pages once per process; sampled every 0.2 s from
-``/proc``) and ``stages``: worker seconds per stage, read from the commands' own records --
+pages shared between its processes counted once; sampled every 10 s), ``peak_rss_mb`` (the
+largest sum of the tree's resident sets, which counts shared pages once per process, so it
+bounds the proportional peak between samples; sampled every 0.2 s from ``/proc``),
+``sampler_cpu_s`` (the CPU seconds the sampling itself took, on the same cores as the command;
+measurements before 2026-12-07 read the proportional sizes every 0.2 s, which took 28 % of a
+core beside a 7 GB tree, and did not record it: ``scripts/bench_sampler.py``) and ``stages``:
+worker seconds per stage,
+read from the commands' own records --
 Table 1: ``patches``, ``whitening``, ``dictionary`` (the representations), ``coding`` and
 ``svm_inner_cv``; Table 2: ``detection_per_image`` (mean seconds per test image and row; in
 the one pass each row's seconds count the candidates and rectangle images it shares in full,
@@ -95,38 +100,79 @@ def _pss_kb(pid: int) -> int:
     return 0
 
 
-def _tree(root_pid: int) -> tuple[float, float, dict]:
-    """Resident memory of ``root_pid`` and all its descendants (MiB): the sum of their
-    resident sets and the sum of their proportional set sizes (shared pages counted once, not
-    once per process: loky's memory-mapped arrays, the libraries), and their user + system
-    clock ticks per pid, from /proc."""
+PAGE_KB = os.sysconf("SC_PAGE_SIZE") // 1024
+SAMPLE_EVERY = 0.2  # seconds between samples of the tree's resident sets and clock ticks
+PSS_EVERY = 10.0  # seconds between samples of its proportional set sizes (smaps_rollup)
+
+
+def _children(pid: int) -> list[int] | None:
+    """The children of ``pid`` from /proc (every thread's ``children`` list; None when the
+    kernel does not provide those lists)."""
+    kids: list[int] = []
+    try:
+        tasks = list(os.scandir(f"/proc/{pid}/task"))
+    except OSError:
+        return kids
+    for task in tasks:
+        try:
+            with open(f"{task.path}/children") as fh:
+                kids.extend(int(c) for c in fh.read().split())
+        except FileNotFoundError:
+            if not os.path.exists(f"/proc/{pid}"):
+                return kids  # the process ended
+            return None  # no children lists in this kernel (CONFIG_PROC_CHILDREN)
+        except OSError:
+            continue
+    return kids
+
+
+def _parents() -> dict[int, list[int]]:
+    """Every process's children, from a scan of /proc (when the kernel gives no lists)."""
     children: dict[int, list[int]] = {}
-    rss: dict[int, int] = {}
-    ticks: dict[int, int] = {}
     for entry in os.scandir("/proc"):
         if not entry.name.isdigit():
             continue
         try:
-            with open(f"/proc/{entry.name}/status") as fh:
-                fields = dict(line.split(":", 1) for line in fh if ":" in line)
             with open(f"/proc/{entry.name}/stat") as fh:
-                stat = fh.read().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
+                ppid = int(fh.read().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
             continue
-        pid = int(entry.name)
-        children.setdefault(int(fields.get("PPid", "0").strip() or 0), []).append(pid)
-        rss[pid] = int(fields.get("VmRSS", "0 kB").split()[0])
-        ticks[pid] = int(stat[11]) + int(stat[12])  # utime, stime
-    total, pss, todo, mine = 0, 0, [root_pid], {}
+        children.setdefault(ppid, []).append(int(entry.name))
+    return children
+
+
+def _tree(root_pid: int, pss: bool = True) -> tuple[float, float | None, dict]:
+    """Resident memory of ``root_pid`` and all its descendants (MiB): the sum of their
+    resident sets and, with ``pss``, the sum of their proportional set sizes (shared pages
+    counted once, not once per process: loky's memory-mapped arrays, the libraries; None
+    without), and their user + system clock ticks per pid, from /proc.
+
+    The tree is walked from ``root_pid`` through the kernel's children lists (a scan of /proc
+    only where it has none), and each process's ``stat`` gives both its ticks and its resident
+    set. ``smaps_rollup`` walks a process's page tables in the kernel, which costs CPU in
+    proportion to the memory mapped (beside a 7 GB tree, 28 % of a core when read every 0.2 s),
+    so the proportional sizes are read only when asked (:data:`PSS_EVERY`)."""
+    scanned = None
+    total, pss_kb, todo, mine = 0, 0, [root_pid], {}
     while todo:
         pid = todo.pop()
-        total += rss.get(pid, 0)
-        if pid in rss:
-            pss += _pss_kb(pid)
-        if pid in ticks:
-            mine[pid] = ticks[pid]
-        todo.extend(children.get(pid, []))
-    return total / 1024, pss / 1024, mine
+        if pid in mine:
+            continue
+        try:
+            with open(f"/proc/{pid}/stat") as fh:
+                stat = fh.read().rsplit(")", 1)[1].split()
+            mine[pid] = int(stat[11]) + int(stat[12])  # utime, stime
+            total += int(stat[21]) * PAGE_KB  # rss (pages)
+        except (OSError, IndexError, ValueError):
+            continue
+        if pss:
+            pss_kb += _pss_kb(pid)
+        kids = _children(pid)
+        if kids is None:
+            scanned = _parents() if scanned is None else scanned
+            kids = scanned.get(pid, [])
+        todo.extend(kids)
+    return total / 1024, (pss_kb / 1024 if pss else None), mine
 
 
 class Interrupted(KeyboardInterrupt):
@@ -141,14 +187,16 @@ class Interrupted(KeyboardInterrupt):
 
 
 def code_version() -> str | None:
-    """The repository's commit, with ``+dirty`` when tracked files differ from it (None outside
-    a git checkout): which code a timing measured."""
+    """The repository's commit, with ``+dirty`` when tracked files outside ``results/`` differ
+    from it (None outside a git checkout): which code a timing measured."""
     repo = Path(__file__).resolve().parents[1]
     try:
         head = subprocess.check_output(["git", "-C", str(repo), "rev-parse", "--short=12",
                                         "HEAD"], text=True, stderr=subprocess.DEVNULL).strip()
+        # results/ is data, not code: a remeasurement removes its committed folders first
         dirty = subprocess.check_output(["git", "-C", str(repo), "status", "--porcelain",
-                                         "--untracked-files=no"], text=True,
+                                         "--untracked-files=no", "--", ".",
+                                         ":(exclude)results"], text=True,
                                         stderr=subprocess.DEVNULL).strip()
     except (OSError, subprocess.CalledProcessError):
         return None
@@ -187,13 +235,23 @@ def timed(cmd: list[str]) -> dict:
     ticks: dict = {}
     stop = threading.Event()
 
+    sampler_cpu = [0.0]
+
     def sample():
-        while not stop.wait(0.2):
-            mb, pss_mb, now = _tree(proc.pid)
-            samples.append((time.perf_counter() - t0, mb))
-            pss.append(pss_mb)
+        # the sampler's own CPU time (this thread's) is recorded: it runs beside the command
+        # on the same cores, so what it takes the command does not get
+        c0, next_pss = time.thread_time(), 0.0
+        while not stop.wait(SAMPLE_EVERY):
+            now_s = time.perf_counter() - t0
+            with_pss = now_s >= next_pss
+            mb, pss_mb, now = _tree(proc.pid, pss=with_pss)
+            samples.append((now_s, mb))
+            if with_pss:
+                pss.append(pss_mb)
+                next_pss = now_s + PSS_EVERY
             for pid, t in now.items():
                 ticks[pid] = max(ticks.get(pid, 0), t)
+            sampler_cpu[0] = time.thread_time() - c0
 
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
@@ -217,7 +275,8 @@ def timed(cmd: list[str]) -> dict:
     peak = max((m for _, m in samples), default=0.0)
     record = {"wall_s": round(wall, 2), "cpu_s": round(cpu, 2), "peak_rss_mb": round(peak, 1),
               "peak_pss_mb": round(max(pss, default=0.0), 1),
-              "rss_trace_mb": rss_trace(samples, wall), "code": version, "cpu": cpu_name(),
+              "rss_trace_mb": rss_trace(samples, wall), "sampler_cpu_s": round(sampler_cpu[0], 2),
+              "code": version, "cpu": cpu_name(),
               "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)]}
     if interrupted is not None:
         raise Interrupted(record, interrupted) from None
@@ -248,6 +307,7 @@ def resumed(key: str, cmd: list[str], partial_path: Path) -> dict:
            "peak_rss_mb": max(p["peak_rss_mb"] for p in allp),
            "peak_pss_mb": max(p.get("peak_pss_mb", 0.0) for p in allp),
            "rss_trace_mb": [p["rss_trace_mb"] for p in allp], "segments": len(allp),
+           "sampler_cpu_s": [p.get("sampler_cpu_s") for p in allp],
            "code": [p.get("code") for p in allp], "cpu": [p.get("cpu") for p in allp],
            "load_average": [p.get("load_average") for p in allp]}
     partial.pop(key, None)

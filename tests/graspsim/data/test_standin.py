@@ -211,7 +211,7 @@ def test_bench_scale_timing_names_the_code_and_the_load_it_ran_beside(tmp_path, 
     assert bench.resumed("table2_300", ["cmd"], partial)["code"] == ["aaa", "bbb"]
 
 
-def test_bench_scale_tree_memory_counts_shared_pages_once_in_its_pss():
+def test_bench_scale_tree_memory_counts_shared_pages_once_in_its_pss(monkeypatch):
     import subprocess
     import sys
     from pathlib import Path
@@ -229,6 +229,11 @@ def test_bench_scale_tree_memory_counts_shared_pages_once_in_its_pss():
     try:
         assert [proc.stdout.readline() for _ in range(2)] == ["ready\n"] * 2
         rss, pss, ticks = bench._tree(proc.pid)
+        # without the proportional sizes (read less often), and through a scan of /proc on a
+        # kernel without children lists: the same processes and resident sets
+        rss_only, no_pss, ticks_only = bench._tree(proc.pid, pss=False)
+        monkeypatch.setattr(bench, "_children", lambda pid: None)
+        rss_scan, pss_scan, ticks_scan = bench._tree(proc.pid)
     finally:
         proc.stdin.close()
         proc.wait()
@@ -236,6 +241,8 @@ def test_bench_scale_tree_memory_counts_shared_pages_once_in_its_pss():
     assert len(ticks) == 2  # the child and its fork
     assert rss > 400 and pss < rss - 150, (rss, pss)
     assert pss > 200
+    assert no_pss is None and set(ticks_only) == set(ticks_scan) == set(ticks)
+    assert abs(rss_only - rss) < 5 and abs(rss_scan - rss) < 5 and abs(pss_scan - pss) < 5
 
 
 def test_bench_scale_timed_command_stopped_keeps_its_cpu_and_ends_the_child():
