@@ -8,16 +8,16 @@ and ``--workers`` children, each holding ``--gb`` GB of written anonymous memory
 (``time.thread_time``) is the cost; the sides alternate ``--rounds`` times so both see the
 same machine:
 
-* ``reference``: the sampler of ``--reference-commit`` (default ``HEAD``; ``git show`` of its
-  ``scripts/bench_scale.py`` into a temporary module), which read every process's status and
-  the tree's ``smaps_rollup`` every 0.2 s;
+* ``reference``: the sampler of ``--reference-commit`` (``git show`` of its
+  ``scripts/bench_scale.py`` into a temporary module); the default, ``ebd7ce6``, is the last
+  commit whose sampler read every process's status and the tree's ``smaps_rollup`` every 0.2 s;
 * ``current``: this checkout's (:data:`SAMPLE_EVERY`, :data:`PSS_EVERY`).
 
 Reported per side: CPU seconds per minute of sampling (a core's share in percent), the peak
 resident and proportional sizes it saw, and their ratio.
 
 Usage: python scripts/bench_sampler.py [--gb 3.5] [--workers 2] [--seconds 30] [--rounds 2]
-       [--reference-commit HEAD]
+       [--reference-commit ebd7ce6]
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seconds", type=float, default=30.0)
     ap.add_argument("--rounds", type=int, default=2)
-    ap.add_argument("--reference-commit", default="HEAD")
+    ap.add_argument("--reference-commit", default="ebd7ce6")
     args = ap.parse_args(argv)
     here = Path(__file__).resolve()
     current = load_module(here.with_name("bench_scale.py"), "bench_scale_current")
