@@ -21,8 +21,7 @@ bounds the proportional peak between samples; sampled every 0.2 s from ``/proc``
 ``sampler_cpu_s`` (the CPU seconds the sampling itself took, on the same cores as the command;
 measurements before 2026-12-07 read the proportional sizes every 0.2 s, which took 28 % of a
 core beside a 7 GB tree, and did not record it: ``scripts/bench_sampler.py``) and ``stages``:
-worker seconds per stage,
-read from the commands' own records --
+worker seconds per stage, read from the commands' own records --
 Table 1: ``patches``, ``whitening``, ``dictionary`` (the representations), ``coding`` and
 ``svm_inner_cv``; Table 2: ``detection_per_image`` (mean seconds per test image and row; in
 the one pass each row's seconds count the candidates and rectangle images it shares in full,
