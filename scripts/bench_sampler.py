@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import inspect
 import json
 import subprocess
 import sys
@@ -92,7 +91,6 @@ def main(argv=None) -> int:
             ["git", "-C", str(here.parents[1]), "show",
              f"{args.reference_commit}:scripts/bench_scale.py"], text=True))
         reference = load_module(ref_path, "bench_scale_reference")
-    ref_takes_flag = "pss" in inspect.signature(reference._tree).parameters
     # a parent (like the benchmark's main process) whose children hold the memory
     parent = subprocess.Popen(
         [sys.executable, "-c",
@@ -108,12 +106,12 @@ def main(argv=None) -> int:
         if parent.stdout.readline() != "ready\n":
             raise SystemExit("bench_sampler: the memory holders did not start")
         for _ in range(args.rounds):
-            rows["reference"].append(sample_for(
-                reference._tree, parent.pid, args.seconds, 0.2,
-                2.0 if ref_takes_flag else None))
-            rows["current"].append(sample_for(
-                current._tree, parent.pid, args.seconds, current.SAMPLE_EVERY,
-                current.PSS_EVERY))
+            for side, mod in (("reference", reference), ("current", current)):
+                # each side at its own cadence; a sampler without PSS_EVERY (before
+                # 2026-12-07) read the proportional sizes at every sample, every 0.2 s
+                rows[side].append(sample_for(mod._tree, parent.pid, args.seconds,
+                                             getattr(mod, "SAMPLE_EVERY", 0.2),
+                                             getattr(mod, "PSS_EVERY", None)))
     finally:
         parent.stdin.close()
         parent.wait()
