@@ -25,7 +25,9 @@ worker seconds per stage, read from the commands' own records --
 Table 1: ``patches``, ``whitening``, ``dictionary`` (the representations), ``coding`` and
 ``svm_inner_cv``; Table 2: ``detection_per_image`` (mean seconds per test image and row; in
 the one pass each row's seconds count the candidates and rectangle images it shares in full,
-so ``detection``, their sum, is an upper bound of the pass's detection time).
+so ``detection``, their sum, is an upper bound of the pass's detection time), and
+``phases_last_segment``: the wall seconds of the pass's training and detection phases in its
+last run.
 ``rss_trace_mb`` is the peak memory in each tenth of the run's wall time (flat when nothing
 accumulates across cells and folds). ``code`` names the commit that ran (``+dirty`` when
 tracked files differed from it), ``cpu`` the processor (:func:`cpu_name`; a measurement of
@@ -403,6 +405,16 @@ def table2_stages(outs: list[Path]) -> dict:
     return {"detection_per_image": round(total / max(n, 1), 3), "detection": round(total, 2)}
 
 
+def table2_phases(out: Path) -> dict:
+    """``{"phases_last_segment": {"training": s, "detection": s}}``: the wall seconds of the
+    one pass's two phases in its last run (``table2.json``); empty for a pass that did not
+    record them."""
+    path = out / "table2.json"
+    phases = json.loads(path.read_text()).get("phase_seconds_this_run") if path.is_file() \
+        else None
+    return {"phases_last_segment": phases} if phases else {}
+
+
 def table2_detector(out: Path) -> dict:
     """The detector Table 2 timed: its search and options, as ``detection.json`` records them."""
     cfg = json.loads((out / "detection.json").read_text())["config"]
@@ -665,7 +677,8 @@ def _run(args) -> int:
             dests = [dest / f"{learner}-{encoder}_{split}" for learner, encoder in TABLE2_ROWS
                      for split in ("image", "object")]
             row["table2"] = {**t, "stages": table2_stages(dests),
-                             "detector": table2_detector(dests[0]), "one_pass": True}
+                             "detector": table2_detector(dests[0]), "one_pass": True,
+                             **table2_phases(dest)}
             write_json_atomic(timings_path, timings, indent=1)
     result = {"machine": {"cpus": os.cpu_count(), "jobs": args.jobs, "code": code_version(),
                           "platform": sys.platform},

@@ -7,7 +7,8 @@ training rectangles, fits its dictionary, and lays the candidates, cuts the rect
 runs the baselines on every test image. Here, per split and fold, the training rectangles are
 built once for all rows and one representation is fitted per learner (NKM-Natural and NKM-SC
 read the same NKM dictionary: :func:`dlsr.detection.train_detectors`), and each test image is
-loaded, searched and cut once and scored by every row's model, the baselines run once
+loaded, searched and cut once and scored by every split's and row's model (an image is tested
+once per split), the baselines run once
 (:func:`graspsim.eval.offline.detection.detect_image`, :func:`dlsr.detection.detect_many`).
 Every record, model and summary is the one the separate benchmark writes, in its folder
 (``OUT/<learner>-<encoder>_<split>/``), so either resumes the other's.
@@ -86,9 +87,10 @@ def table2_benchmark(data, format: str, out, splits=("image", "object"), rows=TA
     * per split and fold, one task trains every row whose model is missing: the training
       rectangles (labelled and grid negatives) are built once and one representation is
       fitted per learner (:func:`train_fold_rows`);
-    * per test image, one task detects with every row's fold model that has no result yet:
-      the image is loaded, the lattice's candidates laid and their rectangle images cut once
-      and scored by each model, the baselines run once
+    * per test image, one task detects with every split's and row's fold model that has no
+      result yet (an image is tested once in each split, by another fold's models): the image
+      is loaded, the lattice's candidates laid and their rectangle images cut once and scored
+      by each model, the baselines run once
       (:func:`graspsim.eval.offline.detection.detect_image`; other searches detect one model
       at a time).
 
@@ -97,8 +99,9 @@ def table2_benchmark(data, format: str, out, splits=("image", "object"), rows=TA
     (row, image) result, and the records do not depend on the number of workers.
 
     Writes ``OUT/table2.json`` (per split and row: accuracy, fold mean and deviation, the
-    baselines, seconds per image, the folder) and ``OUT/table2.md`` (the paper's Table 2 with
-    every row measured).
+    baselines, seconds per image, the folder; the wall seconds of this run's training and
+    detection phases, ``phase_seconds_this_run``) and ``OUT/table2.md`` (the paper's Table 2
+    with every row measured).
 
     Parameters
     ----------
@@ -155,11 +158,14 @@ def table2_benchmark(data, format: str, out, splits=("image", "object"), rows=TA
         executor = Executor("sequential", progress=False) if executor is None else executor
         t_run = time.perf_counter()
         _train(plans, splits, rows, executor)
+        t_trained = time.perf_counter()
         _detect(plans, splits, rows, executor, progress)
         seconds = time.perf_counter() - t_run
+        phases = {"training": t_trained - t_run, "detection": t_run + seconds - t_trained}
         summaries = {key: finish_detection(plan, seconds, n_overlays)
                      for key, plan in plans.items()}
     table = _table(out, summaries, splits, rows, seconds)
+    table["phase_seconds_this_run"] = {k: round(v, 2) for k, v in phases.items()}
     write_text_atomic(out / "table2.json", json.dumps(table, indent=2))
     write_text_atomic(out / "table2.md", table2_rows_markdown(table))
     return table
@@ -184,27 +190,38 @@ def _train(plans, splits, rows, executor) -> None:
 
 
 def _detect(plans, splits, rows, executor, progress) -> None:
-    """Per split, fold and test image, one task that detects with every row's model that has
-    no result for it yet; each result appended to its row's ``results.jsonl``."""
+    """Per test image, one task that detects with every split's and row's fold model that
+    has no result for it yet; each result appended to its row's and split's
+    ``results.jsonl``.
+
+    Every split's folds cover every image once, so an image is tested once per split, by
+    another fold model in each: one task holds them all, and the image is loaded, its
+    candidates laid and its rectangle images cut once for both splits, the baselines run once
+    (their seed is the image's, the same in every split). Tasks follow the first split's
+    folds."""
     tasks, targets = [], []
     detectors = {}
-    for split in splits:
-        first = plans[(rows[0], split)]
-        baselines = benchmark_baselines(first.training["region"])
-        for k, (_, test) in enumerate(first.folds):
-            for i in test:
-                s = first.samples[i]
-                need = [plans[(row, split)] for row in rows
-                        if s.image_id not in plans[(row, split)].done]
-                if not need:
-                    continue
-                dets = []
-                for p in need:
+    first = plans[(rows[0], splits[0])]
+    baselines = benchmark_baselines(first.training["region"])
+    fold_of = {split: {i: k for k, (_, test) in enumerate(plans[(rows[0], split)].folds)
+                       for i in test} for split in splits}
+    for _, test in first.folds:
+        for i in test:
+            s = first.samples[i]
+            need, dets, bases = [], [], []
+            for split in splits:
+                k = fold_of[split][i]
+                for row in rows:
+                    p = plans[(row, split)]
+                    if s.image_id in p.done:
+                        continue
                     if (id(p), k) not in detectors:
                         detectors[(id(p), k)] = p.fold_detector(k)
+                    need.append(p)
                     dets.append(detectors[(id(p), k)])
-                tasks.append((dets, s, baselines, first.seed + i,
-                              [{"config_key": p.key, "fold": k} for p in need]))
+                    bases.append({"config_key": p.key, "fold": k})
+            if need:
+                tasks.append((dets, s, baselines, first.seed + i, bases))
                 targets.append(need)
     bar = tqdm(total=len(tasks), desc="table 2 images", disable=not progress)
     results = executor.imap(detect_image, tasks, desc="detection", star=True)

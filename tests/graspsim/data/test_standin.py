@@ -134,6 +134,18 @@ def test_bench_scale_memory_trace_keeps_each_part_of_the_run_peak():
     assert bench.rss_trace([], wall=0.0, n_bins=2) == [None, None]
 
 
+def test_bench_scale_reads_the_phases_of_table2s_last_run(tmp_path):
+    import json
+
+    bench = _bench_scale()
+    assert bench.table2_phases(tmp_path) == {}  # no table2.json
+    (tmp_path / "table2.json").write_text(json.dumps({"splits": {}}))
+    assert bench.table2_phases(tmp_path) == {}  # a pass that did not record them
+    phases = {"training": 12.5, "detection": 30.25}
+    (tmp_path / "table2.json").write_text(json.dumps({"phase_seconds_this_run": phases}))
+    assert bench.table2_phases(tmp_path) == {"phases_last_segment": phases}
+
+
 def test_bench_scale_names_the_data_each_size_was_measured_on(tmp_path):
     bench = _bench_scale()
     folder = tmp_path / "00"

@@ -162,6 +162,35 @@ def test_one_pass_resumes_at_the_model_and_the_image(dataset, one_pass, tmp_path
             _records(row_folder(out_b, *row, "image"))
 
 
+def test_one_pass_detects_each_image_once_for_both_splits(dataset, one_pass, tmp_path,
+                                                          monkeypatch):
+    """An image is tested once per split, by another fold's models: one task scores it with
+    every split's and row's model, and the records are those of the pass on its own."""
+    import graspsim.eval.offline.table2_pass as t2
+
+    out_b, _ = one_pass
+    real_detect = t2.detect_image
+    calls = []
+
+    def spy(dets, s, baselines, seed, bases):
+        calls.append((s.image_id, sorted((b["config_key"], b["fold"]) for b in bases)))
+        return real_detect(dets, s, baselines, seed, bases)
+
+    monkeypatch.setattr(t2, "detect_image", spy)
+    out = tmp_path / "spied"
+    table = table2_benchmark(dataset, "cornell", out, splits=SPLITS, rows=ROWS, **OPTS)
+    ids = [i for i, _ in calls]
+    assert len(ids) == len(set(ids)) == 6  # one task per image
+    for _, held in calls:  # every split's and row's configuration, each once
+        assert len({key for key, _ in held}) == len(held) == len(ROWS) * len(SPLITS)
+    for split in SPLITS:
+        for row in ROWS:
+            assert _records(row_folder(out, *row, split)) == \
+                _records(row_folder(out_b, *row, split)), (row, split)
+    phases = table["phase_seconds_this_run"]
+    assert set(phases) == {"training", "detection"} and min(phases.values()) > 0
+
+
 def test_one_pass_refuses_per_row_arguments(dataset, tmp_path):
     with pytest.raises(ValueError, match="learner"):
         table2_benchmark(dataset, "cornell", tmp_path, learner="NKM")
