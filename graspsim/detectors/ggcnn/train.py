@@ -276,7 +276,9 @@ def train_network(samples, out, network: str, arch: dict, steps: int = 20_000, s
         Sample-steps between checkpoints.
     snapshots : sequence of int
         Sample-steps at which the model is also saved as ``MODEL_stepN`` (for choosing the
-        budget on validation scenes).
+        budget on validation scenes), at the end of the first batch that reaches ``N`` (its
+        record's ``training.sample_steps``, which exceeds ``N`` when the batch size does not
+        divide it).
     snapshot_seconds : sequence of float
         Training seconds at which the model is also saved, as ``MODEL_timeTs`` (``T`` rounded
         to whole seconds; its record's ``training.snapshot_seconds`` is ``T``), at the end of
@@ -353,7 +355,9 @@ def train_network(samples, out, network: str, arch: dict, steps: int = 20_000, s
                 else:
                     log.info("%s: checkpoint %s is of other data or options: starting afresh",
                              spec.title, ck_pt)
-            snaps = sorted({-(-int(s) // batch_size) for s in snapshots if 0 < s <= steps})
+            snaps: dict = {}  # batch -> the sample-steps asked for that it is the first to reach
+            for s in sorted({int(s) for s in snapshots if 0 < s <= steps}):
+                snaps.setdefault(-(-s // batch_size), []).append(s)
             timed = sorted(float(t) for t in snapshot_seconds if float(t) > seconds)
 
             def checkpoint(b):
@@ -407,9 +411,9 @@ def train_network(samples, out, network: str, arch: dict, steps: int = 20_000, s
                     rec["training"]["snapshot_seconds"] = round(target, 2)
                     save_model(net, pt.with_name(f"{pt.stem}_time{round(target)}s"), rec,
                                spec.name)
-                if b + 1 in snaps:
-                    save_model(net, pt.with_name(f"{pt.stem}_step{(b + 1) * batch_size}"),
-                               record(b + 1), spec.name)
+                for s in snaps.get(b + 1, ()):  # named by the sample-steps asked for
+                    save_model(net, pt.with_name(f"{pt.stem}_step{s}"), record(b + 1),
+                               spec.name)
                 bar.set_postfix(loss=f"{running:.4f}")
                 bar.update(batch_size)
             bar.close()

@@ -294,6 +294,19 @@ def test_perfect_maps_decode_to_the_labelled_rectangle_in_image_pixels(trained):
     assert got[3] == pytest.approx(truth.w, rel=1e-4)
 
 
+def test_step_snapshot_is_named_by_the_steps_asked_for(tmp_path):
+    """A budget the batch size does not divide is saved at the first batch past it, under
+    the budget's name (the plateau search looks it up by that name)."""
+    full = tmp_path / "full"
+    train_ggcnn(tiny_samples(), full, steps=48, seed=5, checkpoint_every=32,
+                snapshots=[20, 24], **TINY)
+    for budget, reached in ((20, 24), (24, 24)):
+        meta = json.loads(model_paths(tmp_path / f"full_step{budget}")[1].read_text())
+        assert meta["training"]["sample_steps"] == reached
+    assert not model_paths(tmp_path / "full_step24")[0].samefile(
+        model_paths(tmp_path / "full_step20")[0])
+
+
 def test_timed_snapshot_is_the_run_at_that_step_and_equal_time_falls_back(tmp_path):
     from graspsim.eval.data_efficiency import equal_time_model
 
