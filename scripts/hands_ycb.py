@@ -55,13 +55,13 @@ def ggcnn_model(curve: Path = CURVE, size: int = SIZE) -> Path:
     """The curve's GG-CNN at ``size`` scenes, at the budget its validation chose (the most
     validation successes, ties to the smaller budget, as the curve chose it)."""
     from dlsr.records import read_json
+    from graspsim.detectors.ggcnn.model import budget_path
 
     result = read_json(curve / "curve.json", "data-efficiency curve")
     val = result["validation"][str(size)]
     budgets = sorted(int(b) for b in val)
     best = max(budgets, key=lambda b: (val[str(b)]["successes"], -b))
-    name = f"ggcnn_{size}" if best == budgets[-1] else f"ggcnn_{size}_step{best}"
-    return curve / "models" / name
+    return budget_path(curve / "models" / f"ggcnn_{size}", best, budgets[-1])
 
 
 def make_detector(name: str, row: Row, curve: Path = CURVE):

@@ -36,7 +36,7 @@ from dlsr.records import read_json, write_text_atomic
 from ..data.datagen import make_dataset
 from ..detectors.base import check_detections
 from ..detectors.ggcnn.detector import GGCNNDetector
-from ..detectors.ggcnn.model import model_paths
+from ..detectors.ggcnn.model import budget_path, model_paths
 from ..detectors.ggcnn.train import train_ggcnn, trainer
 from ..detectors.gripper_aware import gripper_aware
 from ..detectors.loading import load_detector
@@ -224,14 +224,14 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
                         progress=progress)
         val = result["validation"].setdefault(key, {})
         for b in budgets:
-            bpath = gpath if b == budgets[-1] else gpath.with_name(f"{gpath.name}_step{b}")
+            bpath = budget_path(gpath, b, budgets[-1])
             if str(b) not in val:
                 t = trials(GGCNNDetector(bpath, device=device), f"ggcnn_{n}_{b}",
                            out / "validation" / f"ggcnn_{n}_{b}", "train", val_trials, s_val)
                 val[str(b)] = {"successes": t["successes"], "n": t["n"]}
                 write_text_atomic(path, json.dumps(result, indent=2))
         best = max(budgets, key=lambda b: (val[str(b)]["successes"], -b))
-        bpath = gpath if best == budgets[-1] else gpath.with_name(f"{gpath.name}_step{best}")
+        bpath = budget_path(gpath, best, budgets[-1])
         meta = read_json(model_paths(bpath)[1], "GG-CNN model")
         g = GGCNNDetector(bpath, device=device)
         models["ggcnn"] = (g, meta["training"]["seconds"])

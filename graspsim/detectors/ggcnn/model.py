@@ -37,6 +37,8 @@ __all__ = [
     "build_network",
     "n_parameters",
     "model_paths",
+    "snapshot_path",
+    "budget_path",
     "is_ggcnn_model",
     "save_model",
     "load_model",
@@ -187,6 +189,22 @@ def model_paths(path) -> tuple[Path, Path]:
     if p.suffix in (".pt", ".json"):
         p = p.with_suffix("")
     return p.with_name(p.name + ".pt"), p.with_name(p.name + ".json")
+
+
+def snapshot_path(path, budget: int) -> Path:
+    """The model a training run to ``path`` saves on its way, at ``budget`` sample-steps:
+    ``MODEL_stepN`` (without suffix, as :func:`model_paths` takes it), named by the budget
+    asked for whatever the batch that reached it (:func:`graspsim.detectors.ggcnn.train.
+    train_network`'s ``snapshots``)."""
+    p = model_paths(path)[0].with_suffix("")
+    return p.with_name(f"{p.name}_step{int(budget)}")
+
+
+def budget_path(path, budget: int, final: int) -> Path:
+    """The model of ``budget`` sample-steps in a training run to ``path`` of ``final``
+    sample-steps: ``path`` itself at the final budget, else its snapshot
+    (:func:`snapshot_path`)."""
+    return Path(path) if int(budget) == int(final) else snapshot_path(path, budget)
 
 
 def is_ggcnn_model(path) -> bool:

@@ -27,7 +27,7 @@ from pathlib import Path
 
 from dlsr.records import read_json, write_text_atomic
 
-from .model import model_paths
+from .model import model_paths, snapshot_path
 
 log = logging.getLogger(__name__)
 
@@ -76,10 +76,6 @@ def _write_changed(path: Path, record: dict) -> None:
         write_text_atomic(path, text)
 
 
-def _snapshot(path: Path, budget: int) -> Path:
-    return path.with_name(f"{path.name}_step{budget}")
-
-
 def train_to_plateau(train_fn, validate_fn, out, start: int = 2500, recipe: int = 400_000,
                      patience: int = 2, max_seconds: float | None = None) -> dict:
     """Train to the plateau of validation success (see the module docstring); resumable.
@@ -126,7 +122,7 @@ def train_to_plateau(train_fn, validate_fn, out, start: int = 2500, recipe: int 
         if budget in done:
             entry = done[budget]
         else:
-            snap = _snapshot(out, budget)
+            snap = snapshot_path(out, budget)
             if not model_paths(snap)[1].is_file():
                 train_fn(out, budget, [budget])
             meta = read_json(model_paths(snap)[1], "model")["training"]
@@ -146,7 +142,7 @@ def train_to_plateau(train_fn, validate_fn, out, start: int = 2500, recipe: int 
             break
     best = max(curve, key=lambda b: (b["successes"], -b["budget"]))
     result = {"settings": settings, "budgets": curve, "chosen": best["budget"],
-              "model": str(_snapshot(out, best["budget"])), "stopped": stopped}
+              "model": str(snapshot_path(out, best["budget"])), "stopped": stopped}
     _write_changed(rec_path, result)
     return result
 
@@ -166,7 +162,7 @@ def plateau_model(out) -> Path:
     record = read_json(rec_path, "plateau record")
     if "chosen" not in record:
         raise FileNotFoundError(f"{rec_path}: the training has not finished")
-    return _snapshot(out, int(record["chosen"]))
+    return snapshot_path(out, int(record["chosen"]))
 
 
 def prune_snapshots(out) -> list[Path]:

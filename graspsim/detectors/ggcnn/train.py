@@ -31,7 +31,15 @@ from graspsim.data.samples import load_samples
 from .detector import crop_input
 from .grconvnet import CHANNELS, DROPOUT
 from .maps import grasp_maps
-from .model import FILTERS, FORMAT, model_paths, network_of, require_torch, save_model
+from .model import (
+    FILTERS,
+    FORMAT,
+    model_paths,
+    network_of,
+    require_torch,
+    save_model,
+    snapshot_path,
+)
 
 log = logging.getLogger(__name__)
 
@@ -412,7 +420,7 @@ def train_network(samples, out, network: str, arch: dict, steps: int = 20_000, s
                     save_model(net, pt.with_name(f"{pt.stem}_time{round(target)}s"), rec,
                                spec.name)
                 for s in snaps.get(b + 1, ()):  # named by the sample-steps asked for
-                    save_model(net, pt.with_name(f"{pt.stem}_step{s}"), record(b + 1),
+                    save_model(net, snapshot_path(pt, s), record(b + 1),
                                spec.name)
                 bar.set_postfix(loss=f"{running:.4f}")
                 bar.update(batch_size)

@@ -9,6 +9,7 @@ import pytest
 
 from dlsr.datasets import GraspSample
 from dlsr.rectangles import GraspRectangle
+from graspsim.detectors.ggcnn.model import budget_path, snapshot_path
 from graspsim.detectors.ggcnn.plateau import (
     budgets_to,
     plateau_model,
@@ -32,6 +33,15 @@ def test_budgets_double_up_to_the_recipe():
     assert budgets_to(8, 8) == [8]
     with pytest.raises(ValueError, match="between 1 and the recipe's 100"):
         budgets_to(200, 100)
+
+
+def test_snapshot_names_take_the_model_path_with_or_without_suffix(tmp_path):
+    base = tmp_path / "ggcnn_10"
+    for given in (base, base.with_suffix(".pt"), base.with_suffix(".json")):
+        assert snapshot_path(given, 2500) == tmp_path / "ggcnn_10_step2500"
+    assert budget_path(base, 5000, final=5000) == base
+    assert budget_path(base, 2500, final=5000) == tmp_path / "ggcnn_10_step2500"
+    assert model_paths(snapshot_path(base, 20))[0].name == "ggcnn_10_step20.pt"
 
 
 @pytest.mark.parametrize("seq,reached", [
