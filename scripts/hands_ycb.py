@@ -56,12 +56,13 @@ def ggcnn_model(curve: Path = CURVE, size: int = SIZE) -> Path:
     validation successes, ties to the smaller budget, as the curve chose it)."""
     from dlsr.records import read_json
     from graspsim.detectors.ggcnn.model import budget_path
+    from graspsim.eval.data_efficiency import chosen_budget
 
     result = read_json(curve / "curve.json", "data-efficiency curve")
     val = result["validation"][str(size)]
     budgets = sorted(int(b) for b in val)
-    best = max(budgets, key=lambda b: (val[str(b)]["successes"], -b))
-    return budget_path(curve / "models" / f"ggcnn_{size}", best, budgets[-1])
+    return budget_path(curve / "models" / f"ggcnn_{size}", chosen_budget(val, budgets),
+                       budgets[-1])
 
 
 def make_detector(name: str, row: Row, curve: Path = CURVE):

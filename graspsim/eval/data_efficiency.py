@@ -36,7 +36,7 @@ from dlsr.records import read_json, write_text_atomic
 from ..data.datagen import make_dataset
 from ..detectors.base import check_detections
 from ..detectors.ggcnn.detector import GGCNNDetector
-from ..detectors.ggcnn.model import budget_path, model_paths
+from ..detectors.ggcnn.model import budget_path, model_paths, timed_path
 from ..detectors.ggcnn.train import train_ggcnn, trainer
 from ..detectors.gripper_aware import gripper_aware
 from ..detectors.loading import load_detector
@@ -48,7 +48,7 @@ from .trials import TrialConfig, run_trials
 log = logging.getLogger(__name__)
 
 __all__ = ["data_efficiency", "train_dlsr_models", "train_timed", "equal_time_model",
-           "catch_up", "curve_markdown", "curve_figure"]
+           "chosen_budget", "catch_up", "curve_markdown", "curve_figure"]
 
 #: GG-CNN's rows at every size: the budget chosen on validation scenes, and the model trained
 #: for as long as DLSR's default took to train (equal training wall time), raw and
@@ -107,6 +107,20 @@ def train_timed(samples, path, seed: int, **options) -> float:
     return read_json(timing, "timing")["seconds"]
 
 
+def chosen_budget(validation: dict, budgets) -> int:
+    """The GG-CNN budget a size's validation chooses among ``budgets``: the most validation
+    successes, ties to the smaller budget.
+
+    Parameters
+    ----------
+    validation : dict
+        Budget (sample-steps, as a string) to ``{"successes": int, "n": int}``: a size's entry
+        of ``curve.json``'s ``validation``, holding every one of ``budgets``.
+    budgets : iterable of int
+    """
+    return max((int(b) for b in budgets), key=lambda b: (validation[str(b)]["successes"], -b))
+
+
 def equal_time_model(gpath, seconds: float, samples, seed: int, device: str = "cpu",
                      progress: bool = True, network: str = "ggcnn", **arch):
     """GG-CNN trained for ``seconds`` of wall time: the snapshot the full run saved then
@@ -126,7 +140,7 @@ def equal_time_model(gpath, seconds: float, samples, seed: int, device: str = "c
         The full run's network (:func:`graspsim.detectors.ggcnn.train.trainer`); ``arch``, its
         architecture options as the full run took them (e.g. ``channels``).
     """
-    snap = gpath.with_name(f"{gpath.name}_time{round(seconds)}s")
+    snap = timed_path(gpath, seconds)
     if model_paths(snap)[1].is_file():
         taken = read_json(model_paths(snap)[1], "GG-CNN model")["training"]
         if taken.get("snapshot_seconds") == round(seconds, 2):
@@ -230,7 +244,7 @@ def data_efficiency(out, sizes=(10, 30, 100, 300), budgets=(2000, 5000, 10000, 2
                            out / "validation" / f"ggcnn_{n}_{b}", "train", val_trials, s_val)
                 val[str(b)] = {"successes": t["successes"], "n": t["n"]}
                 write_text_atomic(path, json.dumps(result, indent=2))
-        best = max(budgets, key=lambda b: (val[str(b)]["successes"], -b))
+        best = chosen_budget(val, budgets)
         bpath = budget_path(gpath, best, budgets[-1])
         meta = read_json(model_paths(bpath)[1], "GG-CNN model")
         g = GGCNNDetector(bpath, device=device)

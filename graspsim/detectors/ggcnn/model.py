@@ -38,6 +38,7 @@ __all__ = [
     "n_parameters",
     "model_paths",
     "snapshot_path",
+    "timed_path",
     "budget_path",
     "is_ggcnn_model",
     "save_model",
@@ -198,6 +199,15 @@ def snapshot_path(path, budget: int) -> Path:
     train_network`'s ``snapshots``)."""
     p = model_paths(path)[0].with_suffix("")
     return p.with_name(f"{p.name}_step{int(budget)}")
+
+
+def timed_path(path, seconds: float) -> Path:
+    """The model a training run to ``path`` saves on its way after ``seconds`` of training:
+    ``MODEL_timeTs``, ``T`` the seconds rounded to whole ones (without suffix, as
+    :func:`model_paths` takes it; :func:`graspsim.detectors.ggcnn.train.train_network`'s
+    ``snapshot_seconds``)."""
+    p = model_paths(path)[0].with_suffix("")
+    return p.with_name(f"{p.name}_time{round(seconds)}s")
 
 
 def budget_path(path, budget: int, final: int) -> Path:

@@ -39,6 +39,7 @@ from .model import (
     require_torch,
     save_model,
     snapshot_path,
+    timed_path,
 )
 
 log = logging.getLogger(__name__)
@@ -417,11 +418,9 @@ def train_network(samples, out, network: str, arch: dict, steps: int = 20_000, s
                     target = timed.pop(0)
                     rec = record(b + 1)
                     rec["training"]["snapshot_seconds"] = round(target, 2)
-                    save_model(net, pt.with_name(f"{pt.stem}_time{round(target)}s"), rec,
-                               spec.name)
+                    save_model(net, timed_path(pt, target), rec, spec.name)
                 for s in snaps.get(b + 1, ()):  # named by the sample-steps asked for
-                    save_model(net, snapshot_path(pt, s), record(b + 1),
-                               spec.name)
+                    save_model(net, snapshot_path(pt, s), record(b + 1), spec.name)
                 bar.set_postfix(loss=f"{running:.4f}")
                 bar.update(batch_size)
             bar.close()

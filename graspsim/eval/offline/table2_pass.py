@@ -160,8 +160,9 @@ def table2_benchmark(data, format: str, out, splits=("image", "object"), rows=TA
         _train(plans, splits, rows, executor)
         t_trained = time.perf_counter()
         _detect(plans, splits, rows, executor, progress)
-        seconds = time.perf_counter() - t_run
-        phases = {"training": t_trained - t_run, "detection": t_run + seconds - t_trained}
+        t_end = time.perf_counter()
+        seconds = t_end - t_run
+        phases = {"training": t_trained - t_run, "detection": t_end - t_trained}
         summaries = {key: finish_detection(plan, seconds, n_overlays)
                      for key, plan in plans.items()}
     table = _table(out, summaries, splits, rows, seconds)

@@ -9,7 +9,7 @@ import pytest
 
 from dlsr.datasets import GraspSample
 from dlsr.rectangles import GraspRectangle
-from graspsim.detectors.ggcnn.model import budget_path, snapshot_path
+from graspsim.detectors.ggcnn.model import budget_path, snapshot_path, timed_path
 from graspsim.detectors.ggcnn.plateau import (
     budgets_to,
     plateau_model,
@@ -42,6 +42,16 @@ def test_snapshot_names_take_the_model_path_with_or_without_suffix(tmp_path):
     assert budget_path(base, 5000, final=5000) == base
     assert budget_path(base, 2500, final=5000) == tmp_path / "ggcnn_10_step2500"
     assert model_paths(snapshot_path(base, 20))[0].name == "ggcnn_10_step20.pt"
+    assert timed_path(base.with_suffix(".pt"), 7.6) == tmp_path / "ggcnn_10_time8s"
+
+
+def test_the_curves_budget_is_the_most_successes_ties_to_the_smaller():
+    from graspsim.eval.data_efficiency import chosen_budget
+
+    val = {"2000": {"successes": 5}, "5000": {"successes": 7}, "10000": {"successes": 7},
+           "20000": {"successes": 9}}
+    assert chosen_budget(val, [2000, 5000, 10000]) == 5000
+    assert chosen_budget(val, [10000, 2000, 20000]) == 20000
 
 
 @pytest.mark.parametrize("seq,reached", [
